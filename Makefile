@@ -1,0 +1,49 @@
+# The study book's commands. Only python3 (3.11) is needed; everything else is
+# installed into .venv from environment.txt the first time.
+PROFILE ?= paper
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.drfkit-installed
+NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbval-cell-timeout 1200
+
+.PHONY: reproduce quick test unit nbval bench notebooks clean help
+
+help:
+	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
+	@echo "make quick                            the fast profile (< 10 min on 2 CPU cores)"
+	@echo "make test                             unit tests + strict nbval on notebooks/"
+	@echo "make bench                            the timing benchmark alone, prints the table"
+	@echo "make notebooks                        rebuild notebooks/*.ipynb from notebooks/src/ and store outputs"
+	@echo "make clean                            remove what runs produce (keeps results/paper/)"
+
+$(STAMP): environment.txt pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r environment.txt
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $@
+
+reproduce: $(STAMP)
+	$(PY) -m drfkit.pipeline --profile $(PROFILE)
+
+quick:
+	$(MAKE) reproduce PROFILE=quick
+
+test: $(STAMP) unit nbval
+
+unit: $(STAMP)
+	$(PY) -m pytest -q tests
+
+nbval: $(STAMP)
+	$(PY) -m pytest -q $(NBVAL_FLAGS) notebooks/
+
+bench: $(STAMP)
+	$(PY) -m drfkit.timing --profile $(PROFILE)
+
+notebooks: $(STAMP)
+	$(PY) tools/build_notebooks.py --execute
+
+clean:
+	rm -rf results/quick results/nbval results/test .pytest_cache
+	find . -name __pycache__ -type d -not -path './$(VENV)/*' -prune -exec rm -rf {} +
+	rm -rf results/paper/data

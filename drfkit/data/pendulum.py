@@ -1,0 +1,279 @@
+"""The noisy pendulum of the Recurrent Kalman Network benchmark (Becker et al. 2019).
+
+Conventions (every angle in this module follows them)
+------------------------------------------------------
+* theta is the rod angle measured from *hanging straight down*: theta = 0 hangs below
+  the pivot, theta = pi stands upright. Returned angles lie in [-pi, pi).
+* In the image (x to the right, y *down*, pivot at the centre) the rod's tip sits at
+  ``pivot + L * (sin theta, cos theta)``: theta = 0 is drawn below the pivot and a small
+  positive theta swings the tip to the right (counter-clockwise as seen on screen).
+* Targets are ``(cos theta, sin theta)`` in that order, the DRF paper's state X_t. In
+  image terms cos theta is the tip's downward offset and sin theta its rightward one.
+  (The benchmark itself stores (sin, cos); only the order differs.)
+
+Physics (REFERENCE.md §2, kept exactly as the benchmark has it)
+---------------------------------------------------------------
+The benchmark integrates the angle phi measured from *upright* (phi = theta + pi):
+``phi'' = c sin(phi) - friction * phi'`` with ``c = g * l * m / I`` and ``I = m l^2 / 3``,
+so c = 3 g / l (the benchmark's constant; a uniform rod about its end would have
+3 g / (2 l), we keep the benchmark's). In theta this reads
+``theta'' = -c sin(theta) - friction * theta'``, stable at theta = 0, small-angle
+period 2 pi sqrt(l / (3 g)) = 1.158 s (23.2 frames). Semi-implicit Euler: per sub-step
+``v <- v + h (c sin phi - friction v)`` then ``phi <- phi + h v`` (new v), h = 1e-4 s,
+500 sub-steps per 0.05 s frame. After each frame the angular velocity receives
+N(0, 0.1^2) transition noise and phi is wrapped to [0, 2 pi); theta = phi - pi.
+Initial phi ~ U[0, 2 pi) (so theta is uniform too), initial velocity 0. m = l = 1,
+g = 9.81, friction 0.1.
+
+Rendering
+---------
+A line from the pivot at the centre of a 128 x 128 canvas, 55 px long and 8 px wide,
+intensity 1.0, anti-aliased (``cv2.line(..., cv2.LINE_AA)`` with sub-pixel end points),
+then area-averaged down to 24 x 24 (``cv2.resize(..., INTER_AREA)``) and stored as uint8
+0..255. The canvas holds the intensities 0..1 as 0..255 in 8 bits because OpenCV only
+anti-aliases on 8-bit images (on a float canvas it silently draws an aliased line). The
+pivot is the canvas's geometric centre, pixel coordinate 63.5, which maps onto the
+centre of the small image, (11.5, 11.5).
+
+Noise: see ``drfkit.data.noise`` (per-sequence clean factor f, noise level
+n' = max_noise * (1 - f), convex blend with uniform pixel noise).
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import cv2
+import numpy as np
+
+from drfkit.data.noise import blend_uniform_noise, rkn_noise_factors
+from drfkit.io import cached_npz
+
+# Physics (the benchmark's values).
+MASS = 1.0
+LENGTH = 1.0
+GRAVITY = 9.81
+FRICTION = 0.1
+FRAME_DT = 0.05
+N_SUBSTEPS = 500  # 500 x 1e-4 s per frame
+TRANSITION_NOISE_STD = 0.1
+
+# Rendering.
+IMAGE_SIZE = 24
+CANVAS_SIZE = 128
+ROD_LENGTH_PX = 55.0
+ROD_WIDTH_PX = 8
+_SHIFT_BITS = 4  # cv2.line takes fixed-point coordinates with this many fractional bits
+_CANVAS_PIVOT = (CANVAS_SIZE - 1) / 2.0  # 63.5: the geometric centre in pixel-centre coordinates
+_IMAGE_PIVOT = (IMAGE_SIZE - 1) / 2.0  # 11.5
+
+# Bump when the generator changes, so old caches are not reused.
+GENERATOR_VERSION = 1
+_NOISE_CHUNK = 256  # sequences blended at once (bounds the memory of the pixel noise)
+
+
+def generate_pendulum(n_sequences: int, seq_len: int, max_noise: float, seed: int) -> dict[str, np.ndarray]:
+    """Simulate, render and corrupt ``n_sequences`` pendulum sequences of ``seq_len`` frames.
+
+    Returns a dict of arrays:
+      'images'  uint8 (N, T, 24, 24)  noisy observations
+      'clean'   uint8 (N, T, 24, 24)  the same frames without noise
+      'targets' float32 (N, T, 2)     (cos theta, sin theta)
+      'noise'   float32 (N, T)        per-frame noise level n' in [0, max_noise] (0 = clean)
+      'theta'   float32 (N, T)        angle from hanging down, in [-pi, pi)
+
+    Deterministic for a seed. Physics, the noise factor f and the pixel noise come from
+    three independent child generators of ``SeedSequence(seed)``, so the same seed with a
+    different ``max_noise`` gives the same motions, clean images and f; only the
+    rescaling n' = max_noise * (1 - f) and hence the noisy images differ.
+    """
+    _check_generation_args(n_sequences, seq_len, max_noise, seed)
+    physics_rng, factor_rng, pixel_rng = (
+        np.random.default_rng(child) for child in np.random.SeedSequence(seed).spawn(3)
+    )
+    # The benchmark draws the angle from upright in [0, 2 pi); shift to hanging-down.
+    theta0 = physics_rng.uniform(0.0, 2.0 * np.pi, size=n_sequences) - np.pi
+    theta, _ = _simulate(theta0, seq_len, physics_rng)
+    clean = render_pendulum(theta)
+
+    factors = rkn_noise_factors(n_sequences, seq_len, factor_rng)
+    noise = (float(max_noise) * (1.0 - factors)).astype(np.float32)
+    images = np.empty_like(clean)
+    for start in range(0, n_sequences, _NOISE_CHUNK):
+        chunk = slice(start, start + _NOISE_CHUNK)
+        images[chunk] = blend_uniform_noise(clean[chunk], noise[chunk], pixel_rng)
+
+    targets = np.stack([np.cos(theta), np.sin(theta)], axis=-1).astype(np.float32)
+    return {
+        "images": images,
+        "clean": clean,
+        "targets": targets,
+        "noise": noise,
+        "theta": theta.astype(np.float32),
+    }
+
+
+def load_pendulum(
+    cache_dir: str | os.PathLike,
+    split: str,
+    n_sequences: int,
+    seq_len: int,
+    max_noise: float,
+    seed: int,
+) -> dict[str, np.ndarray]:
+    """``generate_pendulum`` cached as ``<cache_dir>/pendulum-<split>-<hash>.npz``.
+
+    The hash covers every argument (and the generator version), so any change builds a
+    new file; a corrupt file is rebuilt. ``split`` is a free label ('train', 'val',
+    'test', ...) used in the file name; the caller picks distinct seeds per split.
+    """
+    if not isinstance(split, str) or not re.fullmatch(r"[A-Za-z0-9_.\-]+", split):
+        raise ValueError(f"split must be a non-empty name of letters, digits, '_', '-', '.', got {split!r}")
+    _check_generation_args(n_sequences, seq_len, max_noise, seed)
+    params = {
+        "split": split,
+        "n_sequences": int(n_sequences),
+        "seq_len": int(seq_len),
+        "max_noise": float(max_noise),
+        "seed": int(seed),
+        "generator_version": GENERATOR_VERSION,
+    }
+    return cached_npz(
+        cache_dir,
+        f"pendulum-{split}",
+        params,
+        lambda: generate_pendulum(n_sequences, seq_len, max_noise, seed),
+    )
+
+
+def render_pendulum(theta: np.ndarray) -> np.ndarray:
+    """Clean images of the rod at angles ``theta`` (...) -> uint8 (..., 24, 24).
+
+    theta is measured from hanging down (0 is drawn below the pivot, positive to the right).
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    if not np.all(np.isfinite(theta)):
+        raise ValueError("theta must be finite")
+    flat = theta.reshape(-1)
+    scale = 1 << _SHIFT_BITS
+    pivot = int(round(_CANVAS_PIVOT * scale))
+    tips_x = np.rint((_CANVAS_PIVOT + ROD_LENGTH_PX * np.sin(flat)) * scale).astype(np.int64)
+    tips_y = np.rint((_CANVAS_PIVOT + ROD_LENGTH_PX * np.cos(flat)) * scale).astype(np.int64)
+    out = np.empty((flat.size, IMAGE_SIZE, IMAGE_SIZE), dtype=np.uint8)
+    canvas = np.zeros((CANVAS_SIZE, CANVAS_SIZE), dtype=np.uint8)
+    for i in range(flat.size):
+        canvas.fill(0)
+        cv2.line(
+            canvas, (pivot, pivot), (int(tips_x[i]), int(tips_y[i])), 255,
+            thickness=ROD_WIDTH_PX, lineType=cv2.LINE_AA, shift=_SHIFT_BITS,
+        )
+        out[i] = cv2.resize(canvas, (IMAGE_SIZE, IMAGE_SIZE), interpolation=cv2.INTER_AREA)
+    return out.reshape(theta.shape + (IMAGE_SIZE, IMAGE_SIZE))
+
+
+def estimate_angle(clean_images: np.ndarray) -> np.ndarray:
+    """Rod angle from clean images, uint8 (..., 24, 24) -> float64 (...) in (-pi, pi].
+
+    The intensity-weighted centroid of a straight rod lies on the rod (half-way along it),
+    so its direction from the pivot (the image centre) is the angle:
+    theta = atan2(x_offset, y_offset) with y pointing down. An all-black image has no
+    angle and gives NaN. Meant for clean images; noise pulls the centroid to the centre.
+    """
+    images = np.asarray(clean_images)
+    if images.dtype != np.uint8:
+        raise TypeError(f"clean_images must be uint8, got dtype {images.dtype}")
+    if images.ndim < 2 or images.shape[-2:] != (IMAGE_SIZE, IMAGE_SIZE):
+        raise ValueError(f"clean_images must have shape (..., {IMAGE_SIZE}, {IMAGE_SIZE}), got {images.shape}")
+    weights = images.astype(np.float64)
+    offsets = np.arange(IMAGE_SIZE, dtype=np.float64) - _IMAGE_PIVOT
+    total = weights.sum(axis=(-2, -1))
+    x = (weights * offsets[None, :]).sum(axis=(-2, -1))
+    y = (weights * offsets[:, None]).sum(axis=(-2, -1))
+    with np.errstate(invalid="ignore"):
+        return np.where(total > 0, np.arctan2(x, y), np.nan)
+
+
+def check_images(images) -> None:
+    """Raise a clear error unless ``images`` is a non-empty uint8 array (N, T, 24, 24).
+
+    Float images (including any holding NaN) are rejected by the dtype rule: the pipeline
+    stores pixels as uint8 0..255 and scales them itself.
+    """
+    if not isinstance(images, np.ndarray):
+        raise TypeError(f"images must be a numpy array, got {type(images).__name__}")
+    if images.dtype != np.uint8:
+        raise TypeError(
+            f"images must be uint8 0..255 (N, T, {IMAGE_SIZE}, {IMAGE_SIZE}), got dtype {images.dtype}; "
+            "float images (and any NaN in them) are not accepted, convert with np.clip(x, 0, 255).astype(np.uint8)"
+        )
+    if images.ndim != 4 or images.shape[2:] != (IMAGE_SIZE, IMAGE_SIZE):
+        raise ValueError(f"images must have shape (N, T, {IMAGE_SIZE}, {IMAGE_SIZE}), got {images.shape}")
+    if images.size == 0:
+        raise ValueError(f"images is empty (shape {images.shape}); need at least one sequence and one frame")
+
+
+def _simulate(
+    theta0: np.ndarray,
+    seq_len: int,
+    rng: np.random.Generator | None,
+    *,
+    friction: float = FRICTION,
+    transition_noise_std: float = TRANSITION_NOISE_STD,
+    gravity: float = GRAVITY,
+    length: float = LENGTH,
+    mass: float = MASS,
+    frame_dt: float = FRAME_DT,
+    n_substeps: int = N_SUBSTEPS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Integrate N pendulums from rest at ``theta0`` (N,) (hanging-down convention).
+
+    Returns (theta, velocity), each float64 (N, seq_len): frame 0 is the initial state,
+    theta in [-pi, pi). Keyword arguments exist so tests can switch friction and
+    transition noise off; ``rng`` may be None only when transition_noise_std is 0.
+    """
+    phi = np.asarray(theta0, dtype=np.float64).reshape(-1) + np.pi  # angle from upright
+    phi = np.mod(phi, 2.0 * np.pi)
+    n = phi.size
+    if transition_noise_std > 0 and rng is None:
+        raise ValueError("rng is needed when transition_noise_std > 0")
+    inertia = mass * length**2 / 3.0
+    c = gravity * length * mass / inertia
+    h = frame_dt / n_substeps
+    vel = np.zeros(n)
+    accel = np.empty(n)
+    damping = np.empty(n)
+    phis = np.empty((n, seq_len))
+    vels = np.empty((n, seq_len))
+    phis[:, 0], vels[:, 0] = phi, vel
+    for t in range(1, seq_len):
+        for _ in range(n_substeps):
+            # v += h (c sin phi - friction v); phi += h v_new   (in place: this loop is the hot path)
+            np.sin(phi, out=accel)
+            accel *= c
+            np.multiply(vel, friction, out=damping)
+            accel -= damping
+            accel *= h
+            vel += accel
+            np.multiply(vel, h, out=damping)
+            phi += damping
+        if transition_noise_std > 0:
+            vel += rng.normal(0.0, transition_noise_std, size=n)
+        np.mod(phi, 2.0 * np.pi, out=phi)
+        phis[:, t], vels[:, t] = phi, vel
+    return phis - np.pi, vels
+
+
+def _check_generation_args(n_sequences, seq_len, max_noise, seed) -> None:
+    for name, value in (("n_sequences", n_sequences), ("seq_len", seq_len)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name} must be an integer, got {value!r}")
+        if value < 1:
+            raise ValueError(f"{name} must be >= 1, got {value}")
+    if isinstance(max_noise, bool) or not isinstance(max_noise, (int, float, np.integer, np.floating)):
+        raise TypeError(f"max_noise must be a number in [0, 1], got {max_noise!r}")
+    if not 0.0 <= float(max_noise) <= 1.0:  # also rejects NaN
+        raise ValueError(f"max_noise must lie in [0, 1] (0 = clean, 1 = the RKN benchmark), got {max_noise}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed}")

@@ -1,0 +1,142 @@
+"""Evaluation: metrics of one model on one data set, and summaries over seeds.
+
+Every number in the book's tables comes through ``evaluate_model`` (predict once with
+MC dropout, then all metrics on the same predictions) and ``summarise`` (mean and a
+95 % Student-t interval over seeds: mean ± t_{0.975, n-1} · sd / sqrt(n); with a single
+seed the interval is undefined and left empty).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit import metrics
+from drfkit.train import SequenceData
+
+METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
+
+# Two-sided 95 % Student-t quantiles t_{0.975, df}; beyond df = 30 the normal value.
+_T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
+         10: 2.228, 12: 2.179, 15: 2.131, 20: 2.086, 25: 2.060, 30: 2.042}
+
+
+def t975(df: int) -> float:
+    if df < 1:
+        return math.nan
+    if df > 30:
+        return 1.960
+    key = max(k for k in _T975 if k <= df)
+    return _T975[key]
+
+
+def prediction_metrics(mean, total_sigma, targets, mask=None, level: float = 0.95) -> dict[str, float]:
+    """All metrics of Gaussian predictions N(mean, total_sigma^2) against ``targets``.
+
+    mean, total_sigma, targets: (N, T, out); mask: (N, T) bool or None (broadcast over out).
+    """
+    mean, sigma, y = (np.asarray(torch.as_tensor(a).detach().cpu(), dtype=np.float64)
+                      for a in (mean, total_sigma, targets))
+    m = None
+    if mask is not None:
+        m = np.broadcast_to(np.asarray(torch.as_tensor(mask).cpu(), dtype=bool)[..., None], y.shape)
+    lower, upper = metrics.gaussian_interval(mean, sigma, level)
+    return {
+        "mae": metrics.mae(y, mean, mask=m),
+        "picp": metrics.picp(y, lower, upper, mask=m),
+        "mpiw": metrics.mpiw(lower, upper, mask=m),
+        "nll": metrics.gaussian_nll(y, mean, sigma, mask=m),
+        "crps": metrics.crps_gaussian(y, mean, sigma, mask=m),
+        "cal_error": metrics.calibration_error(y, mean, sigma, mask=m),
+    }
+
+
+def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: float | None = None,
+                   level: float = 0.95, batch_size: int = 256, device=None) -> dict[str, float]:
+    """Predict ``data`` with MC dropout and return every metric (PICP as a fraction)."""
+    from drfkit.uncertainty import predict
+
+    pred = predict(model, data.inputs, n_samples=n_samples, dropout_p=dropout_p, batch_size=batch_size,
+                   device=device)
+    out = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
+    out["aleatoric"] = float(torch.as_tensor(pred.aleatoric).mean())
+    out["epistemic"] = float(torch.as_tensor(pred.epistemic).mean())
+    return out
+
+
+def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = METRICS) -> pd.DataFrame:
+    """Mean, 95 % t-interval half-width and seed count of ``values`` grouped ``by``.
+
+    Output columns: ``by...``, ``n_seeds``, and for each value ``<v>``, ``<v>_ci`` (half-width),
+    ``<v>_lo``, ``<v>_hi``.
+    """
+    by, values = list(by), [v for v in values if v in frame.columns]
+    rows = []
+    for key, group in frame.groupby(by, sort=False):
+        key = key if isinstance(key, tuple) else (key,)
+        row: dict[str, Any] = dict(zip(by, key))
+        row["n_seeds"] = len(group)
+        for v in values:
+            x = group[v].to_numpy(dtype=float)
+            mean = float(x.mean())
+            half = t975(len(x) - 1) * float(x.std(ddof=1)) / math.sqrt(len(x)) if len(x) > 1 else math.nan
+            row.update({v: mean, f"{v}_ci": half, f"{v}_lo": mean - half, f"{v}_hi": mean + half})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: Iterable[float | None] = (None,),
+                   models: dict | None = None) -> pd.DataFrame:
+    """Every trained (model, seed) of ``study`` at every test noise level and dropout rate.
+
+    Returns one row per (model, seed, noise, dropout_p) with all ``METRICS`` (PICP as a
+    fraction). ``dropout_p = None`` means each model's own training rate. Test sets are built
+    by ``drfkit.studies`` with the same motions / pedestrians at every noise level.
+    """
+    from drfkit import studies
+
+    models = models if models is not None else studies.trained_models(P, study)
+    device = studies.pick_device(P.device)
+    rows = []
+    for noise in noise_levels:
+        data = (studies.pendulum_data(P, "test", noise) if study == "pendulum"
+                else studies.pedestrian_data(P, "test", noise))
+        for (kind, seed), model in models.items():
+            for p in dropout_rates:
+                torch.manual_seed(seed)  # the dropout masks of MC sampling are part of the seed
+                m = evaluate_model(model, data, n_samples=P.n_samples, dropout_p=p, level=P.interval_level,
+                                   device=device)
+                rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
+                             "dropout_p": model.default_dropout_p if p is None else float(p), **m})
+    return pd.DataFrame(rows)
+
+
+def calibration_points(P, study: str, noise_levels: Iterable[float], models: dict | None = None) -> pd.DataFrame:
+    """Calibration curves (expected vs observed quantile coverage), averaged over seeds.
+
+    Returns columns study, model, noise, expected, observed (mean over seeds), observed_sd.
+    """
+    from drfkit import studies
+    from drfkit.uncertainty import predict
+
+    models = models if models is not None else studies.trained_models(P, study)
+    device = studies.pick_device(P.device)
+    rows = []
+    for noise in noise_levels:
+        data = (studies.pendulum_data(P, "test", noise) if study == "pendulum"
+                else studies.pedestrian_data(P, "test", noise))
+        mask = None
+        if data.mask is not None:
+            mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
+        for (kind, seed), model in models.items():
+            torch.manual_seed(seed)
+            pred = predict(model, data.inputs, n_samples=P.n_samples, device=device)
+            expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
+            rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,
+                      "observed": o} for e, o in zip(expected, observed)]
+    frame = pd.DataFrame(rows)
+    return (frame.groupby(["study", "model", "noise", "expected"], as_index=False)["observed"]
+            .agg(observed="mean", observed_sd="std"))

@@ -1,0 +1,560 @@
+"""Kalman-gain competency gating: MC dropout only on the frames the filter is unsure of.
+
+The paper's discussion proposes the Kalman gain as a measure of competency: run the
+expensive epistemic (MC dropout) pass only where competency is low. Here, per frame:
+
+    mean gain   k_t = mean_i K_t[i, i]            (B, T)  from the filter's gains (B, T, n, n)
+    score       s_t = k_t        if direction = +1  (high gain = low competency)
+                s_t = 1 - k_t    if direction = -1  (low gain = low competency)
+    selected    s_t > threshold                    -> MC dropout on that frame, else one
+                                                      deterministic pass (epistemic = 0)
+
+Why the gain can say "low competency": with H = I the update is K = P⁻ (P⁻ + R)⁻¹. Where
+the encoder is unsure it emits a large R and the gain drops (the filter leans on its
+prediction); where it is sure the gain approaches 1. Which end goes with large errors is a
+property of the trained model, so ``choose_direction`` decides it from a rank correlation
+between k_t and the absolute error of the deterministic prediction, on VALIDATION frames.
+
+Nothing here looks at test data before the gate is fixed: ``fit_gate`` takes only the
+validation set; ``choose_direction`` / ``choose_threshold`` take only validation arrays
+(their arguments say so); the test set enters only ``evaluate_gate`` / ``sweep_gate``,
+which apply a fitted ``Gate``. The threshold is the validation-score quantile of the
+smallest dropout fraction whose validation PICP is within ``tolerance`` of
+always-dropout's validation PICP. It is an absolute score value: on a noisier test set
+more frames cross it, which is the point of a competency measure.
+
+Gated inference is real, not simulated: features (encoder + filter) run once, the head
+runs with S samples on the gathered selected frames and once, deterministically, on the
+others; the results are scattered back. Times are measured, interleaved across settings,
+on the same test batch in the same run. Only models with a filter (DRF) have gains.
+
+Settings (the paper's table): ``no_dropout`` (aleatoric only), ``random`` (the same number
+of frames as the Kalman-gain gate selects on test, drawn uniformly, seeded),
+``kalman_gain``, ``always`` (MC dropout on every frame).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit.evaluate import prediction_metrics
+from drfkit.models.parts import check_dropout_p, check_n_samples
+from drfkit.uncertainty import as_model_input, summarise_samples
+
+SETTINGS = ("no_dropout", "random", "kalman_gain", "always")
+NEVER, ALWAYS = math.inf, -math.inf  # thresholds that select no frame / every frame
+# The paper's intuition (image noise -> large R -> small gain): used only if the validation
+# rank correlation is undefined (constant gains or errors).
+DEFAULT_DIRECTION = -1
+RANDOM_SEED_OFFSET = 7919  # random gating draws from seed + this, apart from the dropout masks
+
+
+# --------------------------------------------------------------------------- scores
+def mean_gain(gains: torch.Tensor) -> torch.Tensor:
+    """Kalman gains (B, T, n, n) -> mean of diag(K_t) per frame (B, T)."""
+    if not isinstance(gains, torch.Tensor) or gains.ndim != 4 or gains.shape[-1] != gains.shape[-2]:
+        shape = tuple(gains.shape) if isinstance(gains, torch.Tensor) else type(gains).__name__
+        raise ValueError(f"gains must be a tensor (B, T, n, n) of Kalman gains, got {shape}; "
+                         f"only models with a filter (kind 'drf') have them")
+    return gains.diagonal(dim1=-2, dim2=-1).mean(dim=-1)
+
+
+def competency_score(gains: torch.Tensor, direction: int) -> torch.Tensor:
+    """Low-competency score (B, T) from gains (B, T, n, n): higher = less competent.
+
+    direction +1: the mean gain itself; -1: one minus it (same ranks, reversed).
+    """
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be +1 (high gain = low competency) or -1 (low gain = low "
+                         f"competency), got {direction!r}")
+    k = mean_gain(gains)
+    return k if direction == 1 else 1.0 - k
+
+
+def rank_correlation(x, y) -> float:
+    """Spearman's rank correlation of two 1-D arrays (average ranks for ties); NaN if either is constant."""
+    x, y = np.asarray(x, dtype=np.float64).reshape(-1), np.asarray(y, dtype=np.float64).reshape(-1)
+    if x.shape != y.shape or x.size < 2:
+        raise ValueError(f"need two 1-D arrays of one length >= 2, got {x.shape} and {y.shape}")
+    rx, ry = pd.Series(x).rank().to_numpy(), pd.Series(y).rank().to_numpy()
+    if rx.std() == 0 or ry.std() == 0:
+        return math.nan
+    return float(np.corrcoef(rx, ry)[0, 1])
+
+
+def choose_direction(val_mean_gain, val_abs_error) -> tuple[int, float]:
+    """From VALIDATION frames only: +1 if a higher mean gain goes with larger errors, else -1.
+
+    val_mean_gain, val_abs_error: (N,) over valid validation frames. Returns (direction, rho).
+    """
+    rho = rank_correlation(val_mean_gain, val_abs_error)
+    if math.isnan(rho):
+        return DEFAULT_DIRECTION, rho
+    return (1 if rho > 0 else -1), rho
+
+
+# --------------------------------------------------------------------------- thresholds
+def threshold_for_fraction(val_scores, fraction: float) -> float:
+    """The score above which ``fraction`` of the VALIDATION scores lie (0 -> never, 1 -> always)."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"fraction must lie in [0, 1], got {fraction}")
+    if fraction == 0.0:
+        return NEVER
+    if fraction == 1.0:
+        return ALWAYS
+    return float(np.quantile(np.asarray(val_scores, dtype=np.float64), 1.0 - fraction))
+
+
+def apply_gating(scores: torch.Tensor, threshold: float, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Frames to run MC dropout on: score > threshold (and a real frame). (B, T) bool."""
+    selected = scores > threshold
+    return selected if mask is None else selected & mask.to(selected.device)
+
+
+def _combine(selected: np.ndarray, det: tuple[np.ndarray, np.ndarray], mc: tuple[np.ndarray, np.ndarray]):
+    """Per frame: the MC-dropout (mean, total) where selected, the deterministic one elsewhere."""
+    pick = selected[:, None]
+    return np.where(pick, mc[0], det[0]), np.where(pick, mc[1], det[1])
+
+
+def choose_threshold(val_scores, val_targets, val_deterministic, val_always, *, tolerance: float,
+                     n_points: int, level: float = 0.95) -> tuple[float, pd.DataFrame]:
+    """Pick the gate's threshold from VALIDATION arrays only.
+
+    val_scores (N,) low-competency scores of the valid validation frames; val_targets (N, out);
+    val_deterministic and val_always: (mean, total sigma) pairs, each (N, out), of the
+    no-dropout and the always-dropout predictions of the same frames.
+    Candidates: fractions 0, 1/(n_points-1), ..., 1 of the frames, as score quantiles. The
+    choice is the smallest fraction whose gated PICP >= always's PICP - tolerance (the
+    fraction 1 always qualifies). Returns (threshold, table of the candidates).
+    """
+    scores = np.asarray(val_scores, dtype=np.float64).reshape(-1)
+    y = np.asarray(val_targets, dtype=np.float64)
+    det = tuple(np.asarray(a, dtype=np.float64) for a in val_deterministic)
+    mc = tuple(np.asarray(a, dtype=np.float64) for a in val_always)
+    if y.ndim != 2 or y.shape[0] != scores.size or any(a.shape != y.shape for a in det + mc):
+        raise ValueError(f"val_targets and each prediction array must be (N, out) with N = {scores.size} "
+                         f"scores; got targets {y.shape}, predictions {[a.shape for a in det + mc]}")
+    if not 0.0 <= tolerance <= 1.0:
+        raise ValueError(f"tolerance is a PICP fraction in [0, 1], got {tolerance}")
+    if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 2:
+        raise ValueError(f"n_points must be an int >= 2 (never ... always), got {n_points!r}")
+    always_picp = prediction_metrics(mc[0], mc[1], y, level=level)["picp"]
+    rows = []
+    for fraction in np.linspace(0.0, 1.0, n_points):
+        threshold = threshold_for_fraction(scores, float(fraction))
+        selected = scores > threshold
+        m = prediction_metrics(*_combine(selected, det, mc), y, level=level)
+        rows.append({"target_fraction": float(fraction), "threshold": threshold,
+                     "val_fraction": float(selected.mean()), "val_picp": m["picp"], "val_mpiw": m["mpiw"],
+                     "val_nll": m["nll"], "val_picp_always": always_picp})
+    table = pd.DataFrame(rows)
+    ok = table["val_picp"] >= always_picp - tolerance
+    table["chosen"] = False
+    table.loc[ok.idxmax() if ok.any() else table.index[-1], "chosen"] = True
+    return float(table.loc[table["chosen"], "threshold"].iloc[0]), table
+
+
+# --------------------------------------------------------------------------- random gating
+def random_selection(mask: torch.Tensor, n_selected: int, seed: int) -> torch.Tensor:
+    """Exactly ``n_selected`` of the True frames of ``mask`` (B, T), uniformly, seeded. (B, T) bool."""
+    if mask.dtype != torch.bool or mask.ndim != 2:
+        raise ValueError(f"mask must be a (B, T) bool tensor of real frames, got {mask.dtype} {tuple(mask.shape)}")
+    valid = mask.reshape(-1).nonzero().squeeze(1)
+    if isinstance(n_selected, bool) or not isinstance(n_selected, int) or not 0 <= n_selected <= valid.numel():
+        raise ValueError(f"n_selected must be an int in [0, {valid.numel()}] (the real frames), got {n_selected!r}")
+    gen = torch.Generator().manual_seed(int(seed))
+    pick = valid[torch.randperm(valid.numel(), generator=gen)[:n_selected].to(valid.device)]
+    out = torch.zeros(mask.numel(), dtype=torch.bool, device=mask.device)
+    out[pick] = True
+    return out.view_as(mask)
+
+
+def random_gating(mask: torch.Tensor, fraction: float, seed: int) -> torch.Tensor:
+    """round(fraction * N) of the N real frames of ``mask`` (B, T), uniformly, seeded."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"fraction must lie in [0, 1], got {fraction}")
+    return random_selection(mask, int(round(fraction * int(mask.sum()))), seed)
+
+
+# --------------------------------------------------------------------------- gated inference
+@dataclass(frozen=True)
+class GatedPrediction:
+    """Tensors (B, T, out) on the model's device; ``selected`` (B, T) bool (frames given MC dropout)."""
+
+    mean: torch.Tensor
+    aleatoric: torch.Tensor
+    epistemic: torch.Tensor
+    total: torch.Tensor
+    selected: torch.Tensor
+
+
+def gated_head(model, h: torch.Tensor, selected: torch.Tensor, n_samples: int, dropout_p: float
+               ) -> GatedPrediction:
+    """The head on features h (B, T, D): S dropout samples on the ``selected`` (B, T) frames only,
+    one deterministic pass on the others. Gather -> head -> scatter; frames are independent in
+    the head, so a frame's result does not depend on which other frames were selected (only
+    on the dropout masks it draws)."""
+    check_n_samples(n_samples)
+    if selected.dtype != torch.bool or tuple(selected.shape) != tuple(h.shape[:2]):
+        raise ValueError(f"selected must be a bool tensor of shape {tuple(h.shape[:2])}, "
+                         f"got {selected.dtype} {tuple(selected.shape)}")
+    if n_samples == 0 and bool(selected.any()):
+        raise ValueError("n_samples must be >= 1 when some frame is selected for MC dropout")
+    out_shape = (*h.shape[:2], model.out_dim)
+    mean, aleatoric = h.new_empty(out_shape), h.new_empty(out_shape)
+    epistemic, total = h.new_zeros(out_shape), h.new_empty(out_shape)
+    rest = ~selected
+    if bool(rest.any()):
+        # (1, M, D): the head sees a batch of one "sequence" of M frames
+        m, s = model.head(h[rest].unsqueeze(0))
+        mean[rest], aleatoric[rest], total[rest] = m[0], s[0], s[0]
+    if bool(selected.any()):
+        means, sigmas = model.head(h[selected].unsqueeze(0), n_samples=n_samples, dropout_p=dropout_p)
+        m, a, e, t = summarise_samples(means, sigmas)
+        mean[selected], aleatoric[selected], epistemic[selected], total[selected] = m[0], a[0], e[0], t[0]
+    return GatedPrediction(mean, aleatoric, epistemic, total, selected)
+
+
+def uncertainty_stage(model, h: torch.Tensor, gains: torch.Tensor | None, mask: torch.Tensor, setting: str, *,
+                      n_samples: int, dropout_p: float, direction: int | None = None,
+                      threshold: float | None = None, n_random: int | None = None,
+                      random_seed: int = 0) -> GatedPrediction:
+    """Everything of ``setting`` after the features h (B, T, D) (and gains (B, T, n, n)):
+
+    no_dropout / always: the head with 0 / S samples on every frame.
+    kalman_gain: score the gains (``direction``), select score > ``threshold`` among the real
+        frames ``mask`` (B, T), gated head.
+    random: draw ``n_random`` real frames with ``random_seed``, gated head.
+    """
+    if setting not in SETTINGS:
+        raise ValueError(f"setting must be one of {SETTINGS}, got {setting!r}")
+    if setting == "no_dropout":
+        selected = torch.zeros(h.shape[:2], dtype=torch.bool, device=h.device)
+        m, s = model.head(h)
+        return GatedPrediction(m, s, torch.zeros_like(m), s, selected)
+    if setting == "always":
+        selected = torch.ones(h.shape[:2], dtype=torch.bool, device=h.device)
+        m, a, e, t = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=dropout_p))
+        return GatedPrediction(m, a, e, t, selected)
+    if setting == "kalman_gain":
+        if direction is None or threshold is None:
+            raise ValueError("the kalman_gain setting needs the direction and threshold of a gate fitted "
+                             "on validation data (fit_gate)")
+        if gains is None:
+            raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter, so no gains "
+                             f"to gate on; gating needs a 'drf' model")
+        selected = apply_gating(competency_score(gains, direction), threshold, mask)
+    else:
+        if n_random is None:
+            raise ValueError("the random setting needs n_random (the Kalman-gain gate's frame count)")
+        selected = random_selection(mask, n_random, random_seed)
+    return gated_head(model, h, selected, n_samples, dropout_p)
+
+
+@torch.no_grad()
+def run_setting(model, inputs: torch.Tensor, mask: torch.Tensor, setting: str, **stage_kwargs
+                ) -> GatedPrediction:
+    """One whole inference of ``setting`` on ``inputs`` (B, T, ...), real frames ``mask`` (B, T):
+    the features once (with gains only for kalman_gain), then ``uncertainty_stage``. Everything
+    the setting costs is inside this call, so timing it times the setting."""
+    h, gains = model.features(inputs, return_gains=setting == "kalman_gain")
+    return uncertainty_stage(model, h, gains, mask, setting, **stage_kwargs)
+
+
+# --------------------------------------------------------------------------- timing
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def measure_interleaved(fns: dict[str, Callable[[], Any]], min_run_time: float, device: torch.device,
+                        block_s: float = 0.01, min_rounds: int = 5) -> dict[str, float]:
+    """Median seconds per call of each fn, measured in interleaved rounds (time.perf_counter).
+
+    Each round times one block of calls (about ``block_s`` seconds, at least one call) of every
+    fn in turn, the order rotated per round, so a slow spell of a shared machine hits every
+    setting alike. At least ``min_rounds`` rounds, and about ``min_run_time`` seconds per fn.
+    """
+    names = list(fns)
+    reps, block = {}, {}
+    with torch.no_grad():
+        for name in names:  # warm-up, and how many calls make a block
+            fns[name]()
+            _sync(device)
+            start = time.perf_counter()
+            fns[name]()
+            _sync(device)
+            once = max(time.perf_counter() - start, 1e-7)
+            reps[name] = max(1, int(block_s / once))
+            block[name] = reps[name] * once
+        per_call: dict[str, list[float]] = {n: [] for n in names}
+        rounds = max(min_rounds, math.ceil(min_run_time / float(np.median(list(block.values())))))
+        for r in range(rounds):
+            for name in names[r % len(names):] + names[:r % len(names)]:
+                fn, n = fns[name], reps[name]
+                _sync(device)
+                start = time.perf_counter()
+                for _ in range(n):
+                    fn()
+                _sync(device)
+                per_call[name].append((time.perf_counter() - start) / n)
+    return {n: float(np.median(v)) for n, v in per_call.items()}
+
+
+# --------------------------------------------------------------------------- fit on validation
+@dataclass(frozen=True)
+class Gate:
+    """A gate fitted on validation data: frames with competency_score(gains, direction) > threshold
+    get MC dropout. ``sweep_thresholds`` are the validation-score quantiles for the fractions
+    0 ... 1 (never ... always) that ``sweep_gate`` applies to test data."""
+
+    direction: int
+    threshold: float
+    rank_correlation: float
+    val_fraction: float
+    val_picp: float
+    val_picp_always: float
+    sweep_fractions: tuple[float, ...]
+    sweep_thresholds: tuple[float, ...]
+
+    def scores(self, gains: torch.Tensor) -> torch.Tensor:
+        return competency_score(gains, self.direction)
+
+    def select(self, gains: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        return apply_gating(self.scores(gains), self.threshold, mask)
+
+
+def _real_mask(data) -> torch.Tensor:
+    n, t = data.targets.shape[:2]
+    return torch.ones(n, t, dtype=torch.bool) if data.mask is None else data.mask.bool()
+
+
+def _eval_mode(model):
+    was = model.training
+    model.eval()
+    return was
+
+
+@torch.no_grad()
+def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tolerance: float,
+             n_points: int, level: float = 0.95, seed: int = 0, device=None) -> tuple[Gate, pd.DataFrame]:
+    """Fit direction and threshold on the VALIDATION set ``val`` (a SequenceData) only.
+
+    Returns the gate and the validation table of candidate fractions (see choose_threshold).
+    """
+    n_samples = check_n_samples(n_samples)
+    if n_samples < 1:
+        raise ValueError("n_samples must be >= 1: the always-dropout reference needs MC samples")
+    p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+    device = torch.device(device) if device is not None else next(model.parameters()).device
+    was = _eval_mode(model)
+    try:
+        x = as_model_input(model, val.inputs).to(device)
+        h, gains = model.features(x, return_gains=True)
+        if gains is None:
+            raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs 'drf'")
+        det_mean, det_sigma = model.head(h)
+        torch.manual_seed(seed)
+        mc_mean, _, _, mc_total = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p))
+    finally:
+        model.train(was)
+    real = _real_mask(val).to(device)
+    y = val.targets.to(device)
+    k = mean_gain(gains)
+    abs_error = (det_mean - y).abs().mean(dim=-1)
+    direction, rho = choose_direction(k[real].cpu().numpy(), abs_error[real].cpu().numpy())
+    scores = competency_score(gains, direction)[real].cpu().numpy()
+    as_np = lambda t: t[real].double().cpu().numpy()  # noqa: E731  (N, out) over real frames
+    threshold, table = choose_threshold(scores, as_np(y), (as_np(det_mean), as_np(det_sigma)),
+                                        (as_np(mc_mean), as_np(mc_total)), tolerance=tolerance,
+                                        n_points=n_points, level=level)
+    chosen = table[table["chosen"]].iloc[0]
+    gate = Gate(direction=direction, threshold=threshold, rank_correlation=rho,
+                val_fraction=float(chosen["val_fraction"]), val_picp=float(chosen["val_picp"]),
+                val_picp_always=float(chosen["val_picp_always"]),
+                sweep_fractions=tuple(table["target_fraction"]), sweep_thresholds=tuple(table["threshold"]))
+    return gate, table.assign(direction=direction, rank_correlation=rho)
+
+
+# --------------------------------------------------------------------------- apply on test
+def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: float) -> dict[str, float]:
+    m = prediction_metrics(pred.mean, pred.total, y, real, level)
+    return {k: m[k] for k in ("picp", "mpiw", "nll", "mae")}
+
+
+@torch.no_grad()
+def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float | None = None,
+                  level: float = 0.95, seed: int = 0, min_run_time: float = 0.3, device=None,
+                  thresholds: dict[str, float] | None = None) -> pd.DataFrame:
+    """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
+
+    Metrics: the features run once, then each setting's ``uncertainty_stage`` with the dropout
+    masks seeded by ``seed``. Random gating selects as many frames as the Kalman-gain gate does
+    on this test set (drawn with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
+    adds Kalman-gain rows, each with its random twin 'random:<name>' (used by ``sweep_gate``).
+
+    Times, per real frame, all measured in this call on the same inputs:
+      head_ms  the uncertainty stage alone (scoring, selection, gather, head, scatter);
+      time_ms  the whole inference (features + stage): for the four settings measured in one
+               piece (``run_setting``); for the extra thresholds, the measured features time
+               (with gains for Kalman-gain, without for random) plus their measured head_ms.
+    Returns one row per setting: setting, threshold, fraction, n_selected, picp (fraction),
+    mpiw, nll, mae, time_ms, head_ms, batch_ms (time_ms for the whole batch), frames, threads.
+    """
+    n_samples = check_n_samples(n_samples)
+    p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+    device = torch.device(device) if device is not None else next(model.parameters()).device
+    x = as_model_input(model, test.inputs).to(device)
+    real = _real_mask(test).to(device)
+    y = test.targets.to(device)
+    n_real = int(real.sum())
+    common = dict(n_samples=n_samples, dropout_p=p)
+    kg = dict(direction=gate.direction)
+    rnd = dict(random_seed=seed + RANDOM_SEED_OFFSET)
+
+    was = _eval_mode(model)
+    try:
+        h, gains = model.features(x, return_gains=True)
+        # name -> (setting, stage keyword arguments); random twins take the Kalman-gain count
+        variants: dict[str, tuple[str, dict[str, Any]]] = {
+            "no_dropout": ("no_dropout", {}), "always": ("always", {})}
+        rows = []
+
+        def evaluate(name, setting, extra):
+            torch.manual_seed(seed)
+            pred = uncertainty_stage(model, h, gains, real, setting, **common, **extra)
+            variants[name] = (setting, extra)
+            rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
+                                                                  else ALWAYS),
+                         "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level)})
+            return pred
+
+        evaluate("no_dropout", "no_dropout", {})
+        evaluate("always", "always", {})
+        for name, thr in {"kalman_gain": gate.threshold, **(thresholds or {})}.items():
+            n_sel = int(evaluate(name, "kalman_gain", {**kg, "threshold": thr}).selected.sum())
+            twin = "random" if name == "kalman_gain" else f"random:{name}"
+            pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
+            assert int(pred.selected.sum()) == n_sel
+            rows[-1]["threshold"] = thr
+
+        stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h, gains, real, s, **common, **e))
+                     for name, (setting, extra) in variants.items()}
+        head_s = measure_interleaved(stage_fns, min_run_time / 3, device)
+        whole_fns = {name: (lambda s=variants[name][0], e=variants[name][1]:
+                            run_setting(model, x, real, s, **common, **e)) for name in SETTINGS}
+        whole_fns["features"] = lambda: model.features(x)
+        whole_fns["features_gains"] = lambda: model.features(x, return_gains=True)
+        whole_s = measure_interleaved(whole_fns, min_run_time, device)
+    finally:
+        model.train(was)
+    frame = pd.DataFrame(rows)
+    frame["fraction"] = frame["n_selected"] / n_real
+    head = frame["setting"].map(head_s)
+    features = np.where(frame["setting"].str.startswith("random"), whole_s["features"], whole_s["features_gains"])
+    whole = frame["setting"].map(whole_s).fillna(pd.Series(features + head, index=frame.index))
+    frame["head_ms"] = head * 1e3 / n_real
+    frame["time_ms"] = whole * 1e3 / n_real
+    frame["batch_ms"] = whole * 1e3
+    frame["frames"] = n_real
+    frame["threads"] = torch.get_num_threads()
+    order = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae", "time_ms",
+             "head_ms", "batch_ms", "frames", "threads"]
+    return frame[order]
+
+
+def split_sweep(table: pd.DataFrame, gate: Gate) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Split ``evaluate_gate(..., thresholds=sweep_thresholds(gate))`` into the four settings and
+    the sweep rows (method in {kalman_gain, random}, val_fraction = the target fraction on validation)."""
+    is_sweep = table["setting"].str.contains(r"q\d+$")
+    sweep = table[is_sweep].copy()
+    sweep.insert(0, "method", np.where(sweep["setting"].str.startswith("random"), "random", "kalman_gain"))
+    index = sweep["setting"].str.extract(r"q(\d+)$")[0].astype(int)
+    sweep.insert(1, "val_fraction", index.map(lambda i: gate.sweep_fractions[i]))
+    return (table[~is_sweep].reset_index(drop=True),
+            sweep.drop(columns="setting").reset_index(drop=True))
+
+
+def sweep_thresholds(gate: Gate) -> dict[str, float]:
+    """Names q0 ... q{m-1} -> the gate's validation-quantile thresholds (never ... always)."""
+    return {f"q{i}": thr for i, thr in enumerate(gate.sweep_thresholds)}
+
+
+def sweep_gate(model, gate: Gate, test, **kwargs) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The four settings and Kalman-gain / random gating at every threshold of
+    ``gate.sweep_thresholds`` (never ... always), on the TEST set, timed in one interleaved run.
+    Returns (settings table, sweep table); see ``evaluate_gate`` and ``split_sweep``."""
+    return split_sweep(evaluate_gate(model, gate, test, thresholds=sweep_thresholds(gate), **kwargs), gate)
+
+
+# --------------------------------------------------------------------------- the study
+def evaluation_level(P, study: str) -> float:
+    """The test noise of the gating table: the largest evaluation level (out of distribution;
+    the paper's pedestrian always-dropout row, 89.7 % / 12.9 m, is its DRF point at p = 0.05)."""
+    return max(P.pend_eval_max_noise) if study == "pendulum" else max(P.ped_eval_p)
+
+
+def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3
+                 ) -> dict[str, pd.DataFrame]:
+    """Fit a gate per DRF seed on validation data, then evaluate and sweep it on the test set.
+
+    Validation data is the ``val`` split at the training noise; test is the ``test`` split at
+    ``evaluation_level``. Returns {'table': one row per seed and setting, 'sweep': one row per seed,
+    method and threshold, 'validation': the candidate table per seed}.
+    """
+    from drfkit import studies
+
+    if study not in ("pendulum", "pedestrians"):
+        raise ValueError(f"study must be 'pendulum' or 'pedestrians', got {study!r}")
+    models = models if models is not None else studies.trained_models(P, study)
+    drf = {seed: m for (kind, seed), m in models.items() if kind == "drf"}
+    if not drf:
+        raise ValueError(f"no trained 'drf' model for {study}: gating needs the filter's gains")
+    device = studies.pick_device(P.device)
+    level_ = evaluation_level(P, study)
+    data = studies.pendulum_data if study == "pendulum" else studies.pedestrian_data
+    val, test = data(P, "val"), data(P, "test", level_)
+    tables, sweeps, vals = [], [], []
+    for seed, model in sorted(drf.items()):
+        model = model.to(device)
+        gate, val_table = fit_gate(model, val, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
+                                   n_points=P.gating_sweep_points, level=P.interval_level, seed=seed,
+                                   device=device)
+        table, sweep = sweep_gate(model, gate, test, n_samples=P.n_samples, level=P.interval_level, seed=seed,
+                                  device=device, min_run_time=min_run_time)
+        ident = {"study": study, "seed": seed, "noise": level_}
+        gate_info = {"direction": gate.direction, "rank_correlation": gate.rank_correlation,
+                     "val_fraction": gate.val_fraction, "val_picp": gate.val_picp,
+                     "val_picp_always": gate.val_picp_always}
+        tables.append(table.assign(**ident, **gate_info))
+        sweeps.append(sweep.assign(**ident))
+        vals.append(val_table.assign(study=study, seed=seed))
+    lead = ["study", "seed", "noise"]
+    cat = lambda fs: pd.concat(fs, ignore_index=True)  # noqa: E731
+    table, sweep = cat(tables), cat(sweeps)
+    return {"table": table[lead + [c for c in table.columns if c not in lead]],
+            "sweep": sweep[lead + [c for c in sweep.columns if c not in lead]],
+            "validation": cat(vals)}
+
+
+def paper_table() -> pd.DataFrame:
+    """The paper's gating table (drfkit.paper.GATING) with PICP as a fraction."""
+    from drfkit.paper import GATING
+
+    return pd.DataFrame([{"study": s, "setting": k, "picp": v[0] / 100, "mpiw": v[1], "time_ms": v[2]}
+                         for s, rows in GATING.items() for k, v in rows.items()])
+
+
+__all__ = [
+    "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
+    "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
+    "GatedPrediction", "gated_head", "run_setting", "measure_interleaved", "Gate", "fit_gate",
+    "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "gating_study", "paper_table",
+]

@@ -1,0 +1,121 @@
+"""The run manifest: everything needed to rerun a profile and to trust its numbers.
+
+``results/<profile>/manifest.json`` holds the machine, package versions, torch build and
+threads, the git commit, and one entry per notebook (its validated parameters, start,
+end, duration). Notebooks add their own entry when they start and finish, so a notebook
+run alone (nbval, papermill by hand) is recorded as well as a full ``make reproduce``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import time
+from datetime import datetime, timezone
+from importlib import metadata
+from typing import Any
+
+from drfkit.io import atomic_write_json
+from drfkit.paths import REPO_ROOT, results_dir
+
+PACKAGES = ("torch", "numpy", "pandas", "matplotlib", "opencv-python-headless", "papermill", "nbval",
+            "PyYAML", "tqdm", "jupyter", "nbclient", "ipykernel", "pytest")
+
+
+def now_iso() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def git_commit() -> dict[str, Any]:
+    def run(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=REPO_ROOT, capture_output=True, text=True,
+                                  timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    return {"commit": run("rev-parse", "HEAD") or None, "dirty": bool(run("status", "--porcelain"))}
+
+
+def cpu_name() -> str:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def environment() -> dict[str, Any]:
+    import torch
+
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    return {
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpu": cpu_name(),
+        "cpu_count": os.cpu_count(),
+        "gpu": gpu,
+        "torch_threads": torch.get_num_threads(),
+        "torch_build": torch.__config__.show().strip().splitlines()[:6],
+        "packages": versions,
+        "git": git_commit(),
+    }
+
+
+def manifest_path(profile: str):
+    return results_dir(profile) / "manifest.json"
+
+
+def read_manifest(profile: str) -> dict[str, Any]:
+    path = manifest_path(profile)
+    if path.exists():
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError:
+            pass  # written atomically, so this is a hand-edit: start afresh
+    return {"profile": profile, "notebooks": {}}
+
+
+def update_manifest(profile: str, **fields: Any) -> dict[str, Any]:
+    manifest = read_manifest(profile)
+    manifest.update(fields)
+    manifest["environment"] = environment()
+    manifest["updated"] = now_iso()
+    atomic_write_json(manifest_path(profile), manifest)
+    return manifest
+
+
+def record_notebook(profile: str, notebook: str, **fields: Any) -> None:
+    """Merge ``fields`` into the manifest entry of ``notebook``."""
+    manifest = read_manifest(profile)
+    entry = manifest.setdefault("notebooks", {}).setdefault(notebook, {})
+    entry.update(fields)
+    manifest["environment"] = environment()
+    manifest["updated"] = now_iso()
+    atomic_write_json(manifest_path(profile), manifest)
+
+
+class NotebookTimer:
+    """Records a notebook's start in the manifest; ``finish()`` records end and duration."""
+
+    def __init__(self, profile: str, notebook: str, params: dict[str, Any]):
+        self.profile, self.notebook = profile, notebook
+        self.t0 = time.perf_counter()
+        record_notebook(profile, notebook, params=params, started=now_iso(), finished=None,
+                        duration_s=None, status="running")
+
+    def finish(self, **extra: Any) -> float:
+        duration = time.perf_counter() - self.t0
+        record_notebook(self.profile, self.notebook, finished=now_iso(), duration_s=round(duration, 2),
+                        status="ok", **extra)
+        return duration

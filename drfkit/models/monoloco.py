@@ -1,0 +1,165 @@
+"""Monoloco (Bertoni et al., ICCV 2019): the per-frame pedestrian distance baseline.
+
+Input: the 17 keypoints' (x, y), already normalised (10 K^-1 [u, v, 1]), centred on the
+middle of the bounding box of the keypoints with confidence > 0 -> 34 numbers.
+Network: Linear(34, 256) -> BN -> ReLU -> Dropout, three residual blocks of two
+(Linear(256, 256) -> BN -> ReLU -> Dropout), Linear(256, 2) -> (mu, s). 407,810 params.
+
+Outputs through the shared interface: mean = mu (metres) and sigma = the std of the
+Laplace(mu, b) with b = exp(s) |mu|, i.e. sigma = sqrt(2) exp(s) |mu|. The loss recovers
+s = log(sigma / (sqrt(2) |mu|)) from (mean, sigma); ``head`` keeps |mu| >= MU_FLOOR in
+that product so the inversion never divides by zero.
+
+Monte Carlo dropout: the whole MLP is stochastic, so the "head" is the whole network and
+``features`` only centres the keypoints. BatchNorm always uses its running statistics
+while sampling (only dropout is switched on), as Monoloco does at test time. The S
+passes run either folded into one batch ('batched') or one after another
+('sequential', as published; kept for the timing study).
+"""
+from __future__ import annotations
+
+import math
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from drfkit.models.parts import N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples
+from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding, frame_mask,
+                                    masked_mean)
+
+# |mu| below this (metres) is replaced by it in sigma = sqrt(2) exp(s) |mu|, so that
+# sigma > 0 and the loss can invert sigma back to s. Real depths are metres away.
+MU_FLOOR = 1e-3
+MC_MODES = ("batched", "sequential")
+_LOG_SQRT2 = 0.5 * math.log(2.0)
+
+
+def keypoint_box_centre(keypoints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(..., 17, 3) -> centre (..., 1, 2) of the bounding box of the detected keypoints
+    (confidence > 0) and the (x, y) relative to it (..., 17, 2). Missed keypoints stay at 0
+    (the box centre) instead of landing at minus the centre; a frame with no keypoint is all 0.
+    """
+    xy = keypoints[..., :2]
+    seen = (keypoints[..., 2] > 0).unsqueeze(-1)  # (..., 17, 1)
+    big = torch.finfo(xy.dtype).max
+    lo = torch.where(seen, xy, big).amin(dim=-2, keepdim=True)
+    hi = torch.where(seen, xy, -big).amax(dim=-2, keepdim=True)
+    any_seen = seen.any(dim=-2, keepdim=True)
+    centre = torch.where(any_seen, 0.5 * (lo + hi), 0.0)
+    return centre, torch.where(seen, xy - centre, 0.0)
+
+
+def centre_keypoints(keypoints: torch.Tensor) -> torch.Tensor:
+    """(B, T, 17, 3) -> (B, T, 34): Monoloco's input, (x, y) minus the centre of the bounding
+    box of the detected keypoints (``keypoint_box_centre``). Layout: x0, y0, x1, y1, ...
+    """
+    check_keypoints(keypoints)
+    return keypoint_box_centre(keypoints)[1].flatten(-2)
+
+
+class Monoloco(SequenceModel):
+    """Per-frame Monoloco MLP on (B, T, 17, 3) keypoints -> depth (B, T, 1).
+
+    Train it on valid frames only (e.g. reshape them to (N, 1, 17, 3)): in training mode
+    BatchNorm statistics are taken over every frame passed in, padding included.
+    """
+
+    kind = "monoloco"
+    training_defaults = {"lr": 2e-3, "epochs": 150, "batch_size": 256,
+                         "lr_step": 20, "lr_gamma": 0.9, "grad_clip": None}
+
+    def __init__(self, input_kind: str = "keypoints", out_dim: int = 1, hidden: int = 256,
+                 n_blocks: int = 3, dropout_p: float = 0.2, mc_mode: str = "batched"):
+        if input_kind != "keypoints" or out_dim != 1:
+            raise ValueError(f"Monoloco takes input_kind='keypoints' and out_dim=1, "
+                             f"got {input_kind!r} and {out_dim!r}")
+        if mc_mode not in MC_MODES:
+            raise ValueError(f"mc_mode must be one of {MC_MODES}, got {mc_mode!r}")
+        check_dropout_p(dropout_p)
+        super().__init__(dict(input_kind=input_kind, out_dim=out_dim, hidden=hidden,
+                              n_blocks=n_blocks, dropout_p=dropout_p, mc_mode=mc_mode))
+        self.dropout_p = float(dropout_p)
+        self.mc_mode = mc_mode
+        self.input_layer = nn.Linear(2 * N_KEYPOINTS, hidden)
+        self.input_norm = nn.BatchNorm1d(hidden)
+        # block i has layers 2i and 2i + 1; the skip adds the block's input to its output
+        self.layers = nn.ModuleList(nn.Linear(hidden, hidden) for _ in range(2 * n_blocks))
+        self.norms = nn.ModuleList(nn.BatchNorm1d(hidden) for _ in range(2 * n_blocks))
+        self.output_layer = nn.Linear(hidden, 2)
+
+    @property
+    def default_dropout_p(self) -> float:
+        return self.dropout_p
+
+    def features(self, inputs, return_gains=False):
+        return centre_keypoints(inputs), None
+
+    def _layer(self, x, linear, norm, p, dropout_on, bn_batch_stats):
+        x = F.batch_norm(linear(x), norm.running_mean, norm.running_var, norm.weight, norm.bias,
+                         training=bn_batch_stats, momentum=norm.momentum, eps=norm.eps)
+        return F.dropout(F.relu(x), p, training=dropout_on)
+
+    def mlp(self, x: torch.Tensor, p: float, dropout_on: bool, bn_batch_stats: bool
+            ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 34) -> mu (N,), s (N,) with explicit dropout / BatchNorm modes."""
+        x = self._layer(x, self.input_layer, self.input_norm, p, dropout_on, bn_batch_stats)
+        for i in range(0, len(self.layers), 2):
+            y = self._layer(x, self.layers[i], self.norms[i], p, dropout_on, bn_batch_stats)
+            y = self._layer(y, self.layers[i + 1], self.norms[i + 1], p, dropout_on, bn_batch_stats)
+            x = x + y
+        out = self.output_layer(x)
+        return out[:, 0], out[:, 1]
+
+    @staticmethod
+    def mean_and_sigma(mu: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mu, s) -> (mean, sigma) with sigma = sqrt(2) exp(s) max(|mu|, MU_FLOOR)."""
+        sigma = math.sqrt(2.0) * torch.exp(s) * mu.abs().clamp_min(MU_FLOOR)
+        return mu.unsqueeze(-1), sigma.unsqueeze(-1)
+
+    def head(self, h, n_samples=0, dropout_p=None):
+        """h (B, T, 34) -> mean, sigma (B, T, 1), or (S, B, T, 1) for n_samples = S > 0."""
+        check_n_samples(n_samples)
+        if h.ndim != 3 or h.shape[-1] != 2 * N_KEYPOINTS:
+            raise ValueError(f"Monoloco.head expects centred keypoints (B, T, 34), got {tuple(h.shape)}")
+        p = self.dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+        b, t, _ = h.shape
+        x = h.reshape(b * t, -1)
+        if n_samples == 0:
+            mu, s = self.mlp(x, p, dropout_on=self.training, bn_batch_stats=self.training)
+            mean, sigma = self.mean_and_sigma(mu, s)
+            return mean.view(b, t, 1), sigma.view(b, t, 1)
+        if p == 0.0:  # identical samples: compute once
+            mu, s = self.mlp(x, p, dropout_on=False, bn_batch_stats=False)
+            mu, s = (v.unsqueeze(0).expand(n_samples, -1) for v in (mu, s))
+        elif self.mc_mode == "batched":
+            folded = x.unsqueeze(0).expand(n_samples, -1, -1).reshape(n_samples * b * t, -1)
+            mu, s = (v.view(n_samples, b * t) for v in
+                     self.mlp(folded, p, dropout_on=True, bn_batch_stats=False))
+        else:
+            passes = [self.mlp(x, p, dropout_on=True, bn_batch_stats=False) for _ in range(n_samples)]
+            mu = torch.stack([m for m, _ in passes])
+            s = torch.stack([v for _, v in passes])
+        mean, sigma = self.mean_and_sigma(mu, s)
+        return mean.reshape(n_samples, b, t, 1), sigma.reshape(n_samples, b, t, 1)
+
+    @staticmethod
+    def log_scale(mean: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
+        """Invert ``mean_and_sigma``: s = log(sigma) - log(sqrt 2) - log(max(|mu|, MU_FLOOR))."""
+        return torch.log(sigma) - _LOG_SQRT2 - torch.log(mean.abs().clamp_min(MU_FLOOR))
+
+    def loss(self, mean, sigma, targets, mask=None):
+        """Monoloco's relative Laplace loss |1 - mu / d| exp(-s) + s, averaged over valid
+        frames; d = targets (metres, > 0), s recovered from sigma."""
+        check_loss_args(mean, sigma, targets)
+        mask = frame_mask(mask, mean.shape)
+        s = self.log_scale(mean, sigma)
+        targets = fill_padding(targets, mask)  # padding may hold d = 0
+        per_value = torch.abs(1.0 - mean / targets) * torch.exp(-s) + s
+        return masked_mean(per_value, mask)
+
+
+def relative_laplace_loss(mu: torch.Tensor, s: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
+    """Reference form of Monoloco's loss on raw outputs, elementwise: |1 - mu/d| e^-s + s."""
+    return torch.abs(1.0 - mu / d) * torch.exp(-s) + s
+
+

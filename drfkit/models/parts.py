@@ -1,0 +1,253 @@
+"""The building blocks shared by every model of the DRF family.
+
+encoder (image or keypoints) -> ObservationHeads (w, r) -> dynamics (none / LSTM /
+recursive filter) -> Decoder (mean, sigma, MC dropout).
+
+Shapes: B batch, T time, N = B*T frames, n latent size, S Monte Carlo samples.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+# ELU(x) + 1 tends to 0 for very negative x; a variance of exactly 0 would make the
+# Kalman innovation covariance singular, so observation and process variances get this
+# floor (the paper has none; it is far below any variance a trained model emits).
+VARIANCE_FLOOR = 1e-4
+
+# The paper's sigma head is ELU + 1 >= 0; the Gaussian NLL needs sigma > 0, so the
+# decoder adds this floor (in output units: radians-ish on the pendulum, metres on
+# pedestrians). It only matters for a head pushed far negative.
+SIGMA_FLOOR = 1e-3
+
+PENDULUM_SIZE = 24
+IMAGE_DOWNSAMPLES = ("pool", "stride")
+N_KEYPOINTS = 17
+
+
+def positive_elu(x: torch.Tensor, floor: float) -> torch.Tensor:
+    """ELU(x) + 1 + floor: the paper's positive head, kept strictly above ``floor``."""
+    return F.elu(x) + (1.0 + floor)
+
+
+def fold_time(x: torch.Tensor, n_trailing: int) -> tuple[torch.Tensor, tuple[int, ...]]:
+    """(B, T, *rest) -> (B*T, *rest), returning (B, T) to unfold later."""
+    lead = tuple(x.shape[: x.ndim - n_trailing])
+    return x.reshape(-1, *x.shape[x.ndim - n_trailing:]), lead
+
+
+class ImageEncoder(nn.Module):
+    """Pendulum frames (B, T, 24, 24) uint8 -> features (B, T, feature_dim).
+
+    The paper: a 5x5 conv, a 3x3 conv, then a fully connected layer. Ours, as the
+    Recurrent Kalman Network's pendulum encoder: conv5x5(12) -> maxpool2 -> ReLU ->
+    conv3x3(12) -> maxpool2 -> ReLU -> flatten (12*6*6) -> Linear -> ReLU. (Pooling
+    before the ReLU is the same function -- ReLU is monotone -- on 4x fewer values.)
+    ``downsample='stride'`` replaces the first pooling by a stride-2 5x5 conv: the
+    encoder's forward+backward is ~2.5x cheaper on CPU, at the cost of departing from
+    the RKN layout. All B*T frames go through in one call.
+    """
+
+    def __init__(self, feature_dim: int = 64, channels: int = 12, downsample: str = "pool"):
+        super().__init__()
+        if downsample not in IMAGE_DOWNSAMPLES:
+            raise ValueError(f"downsample must be one of {IMAGE_DOWNSAMPLES}, got {downsample!r}")
+        self.first_stride = 2 if downsample == "stride" else 1
+        self.conv1 = nn.Conv2d(1, channels, kernel_size=5, padding=2, stride=self.first_stride)
+        self.conv2 = nn.Conv2d(channels, channels, kernel_size=3, padding=1)
+        self.fc = nn.Linear(channels * (PENDULUM_SIZE // 4) ** 2, feature_dim)
+        self.out_dim = feature_dim
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        if images.ndim != 4 or images.shape[-2:] != (PENDULUM_SIZE, PENDULUM_SIZE):
+            raise ValueError(f"pendulum images must have shape (B, T, 24, 24), got {tuple(images.shape)}")
+        if images.dtype == torch.uint8:
+            x = images.to(self.fc.weight.dtype) / 255.0
+        elif images.is_floating_point():
+            # Floats are taken as already scaled to [0, 1]; 0..255 floats would train on
+            # saturated inputs without complaint, so reject them here.
+            if images.numel() and float(images.detach().abs().max()) > 1.5:
+                raise ValueError("float pendulum images must be scaled to [0, 1]; pass uint8 0..255 "
+                                 "images (they are divided by 255 here) or divide by 255 first")
+            x = images.to(self.fc.weight.dtype)
+        else:
+            raise TypeError(f"pendulum images must be uint8 (or float in [0, 1]), got {images.dtype}")
+        x, (b, t) = fold_time(x, 2)
+        x = self.conv1(x.unsqueeze(1))
+        x = F.relu(F.max_pool2d(x, 2) if self.first_stride == 1 else x)
+        x = F.relu(F.max_pool2d(self.conv2(x), 2))
+        x = F.relu(self.fc(x.flatten(1)))
+        return x.view(b, t, -1)
+
+
+class KeypointEncoder(nn.Module):
+    """Keypoints (B, T, 17, 3) = (x, y, confidence) -> features (B, T, feature_dim).
+
+    The paper concatenates the 17x2 keypoints and the 17 confidences. We present the same
+    numbers as Monoloco does -- (x, y) relative to the centre of the keypoints' box, which
+    carries the person's apparent size, hence depth -- plus that centre (where in the image
+    the person is) and the confidences: 34 + 2 + 17 = 53 inputs, Linear -> ReLU -> Linear ->
+    ReLU. Raw coordinates would make the network learn the subtraction itself.
+    """
+
+    def __init__(self, feature_dim: int = 64, hidden: int = 128):
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Linear(N_KEYPOINTS * 3 + 2, hidden), nn.ReLU(),
+            nn.Linear(hidden, feature_dim), nn.ReLU(),
+        )
+        self.out_dim = feature_dim
+
+    def forward(self, keypoints: torch.Tensor) -> torch.Tensor:
+        from drfkit.models.monoloco import keypoint_box_centre
+
+        check_keypoints(keypoints)
+        keypoints = keypoints.to(self.net[0].weight.dtype)
+        centre, centred = keypoint_box_centre(keypoints)  # (B, T, 1, 2), (B, T, 17, 2)
+        x = torch.cat([centred.flatten(-2), centre.flatten(-2), keypoints[..., 2]], dim=-1)
+        return self.net(x)
+
+
+def check_keypoints(keypoints: torch.Tensor) -> None:
+    if keypoints.ndim != 4 or keypoints.shape[-2:] != (N_KEYPOINTS, 3):
+        raise ValueError(f"keypoints must have shape (B, T, 17, 3), got {tuple(keypoints.shape)}")
+    if not keypoints.is_floating_point():
+        raise TypeError(f"keypoints must be float32 (x, y, confidence), got {keypoints.dtype}")
+
+
+class ObservationHeads(nn.Module):
+    """Features (..., D) -> latent observation w (..., n) and the diagonal r of R (..., n).
+
+    w = LayerNorm(Linear1(x)); r = ELU(Linear2(x)) + 1 (+ VARIANCE_FLOOR).
+    """
+
+    def __init__(self, in_dim: int, latent: int = 30):
+        super().__init__()
+        self.linear1 = nn.Linear(in_dim, latent)
+        self.norm = nn.LayerNorm(latent)
+        self.linear2 = nn.Linear(in_dim, latent)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.norm(self.linear1(x)), positive_elu(self.linear2(x), VARIANCE_FLOOR)
+
+
+def mean_and_log_variance(mean: torch.Tensor, variance: torch.Tensor) -> torch.Tensor:
+    """[mean, log variance] (..., 2n): how a Gaussian belief enters the decoder / LSTM.
+
+    Variances span orders of magnitude (the filter shrinks P, the encoder can push r
+    high on noisy frames); the log puts them on the scale of the LayerNorm-ed means.
+    """
+    return torch.cat([mean, torch.log(variance)], dim=-1)
+
+
+class TransitionNetwork(nn.Module):
+    """Previous posterior mean z_{t-1} (B, n) -> F_t (B, n, n), diagonal q_t of Q_t (B, n).
+
+    Two stacked LSTM cells (hidden size ``hidden``) read z_{t-1} only, as in the paper
+    ("a dynamical model in the latent embedding"); P_{t-1} does not enter. One fused
+    Linear emits both outputs: F_t = I + residual, q_t = ELU(.) + 1 (+ VARIANCE_FLOOR).
+    The residual part of the head starts at zero (weights and bias), so an untrained
+    filter has F = I: a random-walk prior, which is stable from the first step.
+    """
+
+    def __init__(self, latent: int = 30, hidden: int = 64):
+        super().__init__()
+        self.latent = latent
+        self.hidden = hidden
+        self.cell1 = nn.LSTMCell(latent, hidden)
+        self.cell2 = nn.LSTMCell(hidden, hidden)
+        self.head = nn.Linear(hidden, latent * latent + latent)
+        with torch.no_grad():
+            self.head.weight[: latent * latent].zero_()
+            self.head.bias[: latent * latent].zero_()
+        self.register_buffer("eye", torch.eye(latent), persistent=False)
+
+    def initial_state(self, batch: int, like: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        zeros = like.new_zeros(batch, self.hidden)
+        return zeros, zeros, zeros, zeros
+
+    def forward(self, z: torch.Tensor, state: tuple[torch.Tensor, ...]
+                ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        h1, c1, h2, c2 = state
+        h1, c1 = self.cell1(z, (h1, c1))
+        h2, c2 = self.cell2(h1, (h2, c2))
+        out = self.head(h2)
+        n = self.latent
+        F_t = out[:, : n * n].view(-1, n, n) + self.eye
+        q_t = positive_elu(out[:, n * n:], VARIANCE_FLOOR)
+        return F_t, q_t, (h1, c1, h2, c2)
+
+
+class Decoder(nn.Module):
+    """x (..., in_dim) -> mean (..., out_dim), sigma (..., out_dim), with MC dropout.
+
+    h = ReLU(Linear3(x)); dropout(h); mean = Linear4(h); sigma = ELU(Linear5(h)) + 1
+    (+ SIGMA_FLOOR). Only the dropout is random, so for Monte Carlo sampling h is
+    computed once and S dropout masks are applied in one batched op.
+
+    ``target_offset`` and ``target_scale`` (fixed, from the training targets) put the
+    outputs in target units: mean = offset + scale * Linear4(h), sigma = scale * (...).
+    The network then works in standardised units -- depths of 5-50 m would otherwise
+    take a 1e-4 learning rate many epochs just to reach their mean. Identity by default.
+    """
+
+    def __init__(self, in_dim: int, out_dim: int, hidden: int = 64, dropout_p: float = 0.1,
+                 target_offset: float = 0.0, target_scale: float = 1.0):
+        super().__init__()
+        check_dropout_p(dropout_p)
+        if not target_scale > 0:
+            raise ValueError(f"target_scale must be > 0, got {target_scale!r}")
+        self.linear3 = nn.Linear(in_dim, hidden)
+        self.linear4 = nn.Linear(hidden, out_dim)
+        self.linear5 = nn.Linear(hidden, out_dim)
+        self.dropout_p = float(dropout_p)
+        self.target_offset, self.target_scale = float(target_offset), float(target_scale)
+
+    def hidden(self, x: torch.Tensor) -> torch.Tensor:
+        """The deterministic part: ReLU(Linear3(x)) (..., hidden)."""
+        return F.relu(self.linear3(x))
+
+    def readout(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(Dropped-out) hidden (..., hidden) -> mean, sigma (..., out_dim)."""
+        mean, sigma = self.linear4(h), positive_elu(self.linear5(h), SIGMA_FLOOR)
+        if self.target_scale == 1.0 and self.target_offset == 0.0:
+            return mean, sigma
+        return self.target_offset + self.target_scale * mean, self.target_scale * sigma
+
+    def forward(self, x: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+        """n_samples = 0: one pass, dropout as nn.Dropout (on in train mode only), shapes
+        (..., out_dim). n_samples = S > 0: S passes with dropout ON at rate ``dropout_p``
+        (default: the module's rate) whatever the mode, shapes (S, ..., out_dim).
+        """
+        check_n_samples(n_samples)
+        p = self.dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+        h = self.hidden(x)
+        if n_samples == 0:
+            return self.readout(F.dropout(h, p, training=self.training))
+        return self.readout(mc_dropout(h, n_samples, p))
+
+
+def mc_dropout(h: torch.Tensor, n_samples: int, p: float) -> torch.Tensor:
+    """S inverted-dropout copies of h (...): (S, ...). Masks are drawn with one
+    ``bernoulli_`` call on an (S, ...) tensor from torch's default generator.
+    With p = 0 the copies are exact (an expand, no arithmetic), so their spread is 0.
+    """
+    if p == 0.0:
+        return h.unsqueeze(0).expand(n_samples, *h.shape)
+    keep = 1.0 - p
+    mask = torch.empty((n_samples, *h.shape), dtype=h.dtype, device=h.device).bernoulli_(keep)
+    return h.unsqueeze(0) * mask.div_(keep)
+
+
+def check_n_samples(n_samples) -> int:
+    if isinstance(n_samples, bool) or not isinstance(n_samples, int) or n_samples < 0:
+        raise ValueError(f"n_samples must be an int >= 0 (0 = one deterministic pass), got {n_samples!r}")
+    return n_samples
+
+
+def check_dropout_p(p) -> float:
+    if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= float(p) < 1.0:
+        raise ValueError(f"dropout_p must be a number in [0, 1), got {p!r}")
+    return float(p)

@@ -1,0 +1,254 @@
+"""The DRF family: NoDynamics, LSTMBaseline and DeepRecursiveFilter.
+
+All three share the encoder, the observation heads and the decoder; they differ only in
+what sits between the heads and the decoder. Every model (Monoloco included) exposes
+the same interface, which the training loop, ``drfkit.uncertainty`` and the timing code
+rely on:
+
+    model.config                 dict that ``build_model`` turns back into the model
+    model.features(x, return_gains=False) -> (h (B, T, D), gains (B, T, n, n) or None)
+                                 the deterministic part, run once per prediction
+    model.head(h, n_samples=0, dropout_p=None) -> (mean, sigma)
+                                 the stochastic part, (B, T, out) or (S, B, T, out)
+    model(x) -> (mean, sigma)    = head(features(x))
+    model.loss(mean, sigma, targets, mask=None) -> scalar
+    model.default_dropout_p, model.kalman_gains(x), model.training_defaults
+
+Inputs: 'pendulum' uint8 images (B, T, 24, 24); 'keypoints' float32 (B, T, 17, 3).
+Outputs: pendulum (B, T, 2) = (cos theta, sin theta); pedestrians (B, T, 1) depth (m).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from torch import nn
+
+from drfkit.filter import kalman_step
+from drfkit.models.parts import (IMAGE_DOWNSAMPLES, Decoder, ImageEncoder, KeypointEncoder, ObservationHeads,
+                                 TransitionNetwork, check_dropout_p, mean_and_log_variance)
+
+INPUT_KINDS = ("pendulum", "keypoints")
+
+# Adam, lr 1e-4 and 200 epochs are the paper's; batch 50 and clipping the gradient norm
+# at 10 (a guard against the odd exploding step through the recursion) are ours.
+DRF_TRAINING_DEFAULTS = {"lr": 1e-4, "epochs": 200, "batch_size": 50,
+                         "lr_step": None, "lr_gamma": 1.0, "grad_clip": 10.0}
+
+_HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def make_encoder(input_kind: str, feature_dim: int, image_downsample: str) -> nn.Module:
+    if input_kind == "pendulum":
+        return ImageEncoder(feature_dim, downsample=image_downsample)
+    if input_kind == "keypoints":
+        return KeypointEncoder(feature_dim)
+    raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
+
+
+def frame_mask(mask: torch.Tensor | None, shape: torch.Size) -> torch.Tensor | None:
+    """Check a (B, T) bool mask of valid frames against outputs of shape (B, T, out)."""
+    if mask is None:
+        return None
+    if mask.dtype != torch.bool or tuple(mask.shape) != tuple(shape[:2]):
+        raise ValueError(f"mask must be a bool tensor of shape {tuple(shape[:2])} (valid frames), "
+                         f"got {mask.dtype} {tuple(mask.shape)}")
+    if not bool(mask.any()):
+        raise ValueError("mask selects no frame: the loss of an empty batch is undefined")
+    return mask
+
+
+def fill_padding(targets: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Targets of padded frames -> 1.0. Padding may hold NaN (or d = 0 for a relative
+    loss); even a masked-out term would then send NaN through the backward pass."""
+    if mask is None:
+        return targets
+    return torch.where(mask.unsqueeze(-1), targets, torch.ones_like(targets))
+
+
+def masked_mean(per_value: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean of (B, T, out) over the valid frames (mask (B, T)) and the outputs."""
+    if mask is None:
+        return per_value.mean()
+    # where, not a product: a NaN/inf computed on a padded frame must not leak into the sum
+    valid = mask.unsqueeze(-1).expand_as(per_value)
+    return torch.where(valid, per_value, 0.0).sum() / (mask.sum() * per_value.shape[-1])
+
+
+def check_loss_args(mean: torch.Tensor, sigma: torch.Tensor, targets: torch.Tensor) -> None:
+    if mean.ndim != 3 or sigma.shape != mean.shape or targets.shape != mean.shape:
+        raise ValueError(f"loss expects mean, sigma and targets of one shape (B, T, out); got "
+                         f"{tuple(mean.shape)}, {tuple(sigma.shape)}, {tuple(targets.shape)}")
+
+
+def gaussian_nll(mean: torch.Tensor, sigma: torch.Tensor, targets: torch.Tensor,
+                 mask: torch.Tensor | None = None) -> torch.Tensor:
+    """The paper's loss: Gaussian NLL log(sqrt(2 pi) sigma) + (y - mean)^2 / (2 sigma^2),
+    averaged over the valid frames and the outputs (constant included, so the value is a
+    true NLL per scalar: 0.9189 at y = mean, sigma = 1)."""
+    check_loss_args(mean, sigma, targets)
+    mask = frame_mask(mask, mean.shape)
+    targets = fill_padding(targets, mask)
+    per_value = torch.log(sigma) + _HALF_LOG_2PI + 0.5 * ((targets - mean) / sigma) ** 2
+    return masked_mean(per_value, mask)
+
+
+class SequenceModel(nn.Module):
+    """Shared interface (see the module docstring); subclasses define ``features``."""
+
+    kind: str = ""
+    training_defaults: dict[str, Any] = DRF_TRAINING_DEFAULTS
+
+    def __init__(self, config: dict[str, Any]):
+        super().__init__()
+        self.config = {"kind": self.kind, **config}
+        self.input_kind = config["input_kind"]
+        self.out_dim = config["out_dim"]
+        self.training_defaults = dict(type(self).training_defaults)
+
+    def features(self, inputs: torch.Tensor, return_gains: bool = False
+                 ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        raise NotImplementedError
+
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p)
+
+    def forward(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h, _ = self.features(inputs)
+        return self.head(h)
+
+    def loss(self, mean: torch.Tensor, sigma: torch.Tensor, targets: torch.Tensor,
+             mask: torch.Tensor | None = None) -> torch.Tensor:
+        return gaussian_nll(mean, sigma, targets, mask)
+
+    @property
+    def default_dropout_p(self) -> float:
+        return self.decoder.dropout_p
+
+    def kalman_gains(self, inputs: torch.Tensor) -> torch.Tensor | None:
+        """Kalman gains (B, T, n, n) of the filter, None for models without one."""
+        return self.features(inputs, return_gains=True)[1]
+
+
+class _EncodedSequenceModel(SequenceModel):
+    """Encoder + observation heads + decoder; subclasses add the dynamics."""
+
+    def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
+                 feature_dim: int = 64, decoder_hidden: int = 64, dropout_p: float = 0.1,
+                 image_downsample: str = "pool", target_offset: float = 0.0, target_scale: float = 1.0,
+                 _extra_config: dict[str, Any] | None = None):
+        if input_kind not in INPUT_KINDS:
+            raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
+        for name, value in (("out_dim", out_dim), ("latent", latent), ("feature_dim", feature_dim),
+                            ("decoder_hidden", decoder_hidden)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive int, got {value!r}")
+        check_dropout_p(dropout_p)
+        if image_downsample not in IMAGE_DOWNSAMPLES:
+            raise ValueError(f"image_downsample must be one of {IMAGE_DOWNSAMPLES}, got {image_downsample!r}")
+        super().__init__(dict(input_kind=input_kind, out_dim=out_dim, latent=latent,
+                              feature_dim=feature_dim, decoder_hidden=decoder_hidden,
+                              dropout_p=dropout_p, image_downsample=image_downsample,
+                              target_offset=float(target_offset), target_scale=float(target_scale),
+                              **(_extra_config or {})))
+        self.latent = latent
+        self.encoder = make_encoder(input_kind, feature_dim, image_downsample)
+        self.heads = ObservationHeads(feature_dim, latent)
+        self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale)
+
+    def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Encode all B*T frames in one call: w, r (B, T, n)."""
+        return self.heads(self.encoder(inputs))
+
+
+class NoDynamics(_EncodedSequenceModel):
+    """Frame by frame: decoder([w_t, log r_t]); no state carried over time."""
+
+    kind = "no_dynamics"
+
+    def features(self, inputs, return_gains=False):
+        w, r = self.observe(inputs)
+        return mean_and_log_variance(w, r), None
+
+
+class LSTMBaseline(_EncodedSequenceModel):
+    """An LSTM over time on [w_t, log r_t] replaces the filter (the paper's 2nd baseline).
+
+    Hidden size 2n (so the decoder input size matches the other models); two layers by
+    default, the depth of the DRF's transition network.
+    """
+
+    kind = "lstm"
+
+    def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
+                 lstm_layers: int = 2, **kwargs: Any):
+        if isinstance(lstm_layers, bool) or not isinstance(lstm_layers, int) or lstm_layers < 1:
+            raise ValueError(f"lstm_layers must be a positive int, got {lstm_layers!r}")
+        super().__init__(input_kind, out_dim, latent, _extra_config={"lstm_layers": lstm_layers},
+                         **kwargs)
+        self.lstm = nn.LSTM(2 * latent, 2 * latent, num_layers=lstm_layers, batch_first=True)
+
+    def features(self, inputs, return_gains=False):
+        w, r = self.observe(inputs)
+        h, _ = self.lstm(mean_and_log_variance(w, r))
+        return h, None
+
+
+class DeepRecursiveFilter(_EncodedSequenceModel):
+    """The paper's DRF: a Kalman filter on the learned latent state.
+
+    Per sequence: w_t, r_t from the encoder for all frames at once; then for t >= 1 the
+    transition network maps z_{t-1} to F_t, q_t and ``kalman_step`` gives z_t, P_t, K_t.
+    The decoder reads [z_t, log diag(P_t)] (P enters through its diagonal only).
+
+    Start: z_0 = w_0, P_0 = diag(r_0) -- the exact posterior after the first observation
+    under an uninformative prior, so the gain at t = 0 is reported as I.
+    The filter is causal: padding must trail a sequence's valid frames.
+    """
+
+    kind = "drf"
+
+    def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
+                 transition_hidden: int = 64, **kwargs: Any):
+        if isinstance(transition_hidden, bool) or not isinstance(transition_hidden, int) \
+                or transition_hidden < 1:
+            raise ValueError(f"transition_hidden must be a positive int, got {transition_hidden!r}")
+        super().__init__(input_kind, out_dim, latent,
+                         _extra_config={"transition_hidden": transition_hidden}, **kwargs)
+        self.transition = TransitionNetwork(latent, transition_hidden)
+
+    def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False
+                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Filter observations w (B, T, n) with noise variances r (B, T, n).
+
+        Returns posterior means z (B, T, n), posterior variances diag(P) (B, T, n) and,
+        if asked, the gains K (B, T, n, n) (else None).
+        """
+        if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != self.latent:
+            raise ValueError(f"w and r must both have shape (B, T, {self.latent}), "
+                             f"got {tuple(w.shape)} and {tuple(r.shape)}")
+        batch, steps, n = w.shape
+        # unbind once: indexing w[:, t] in the loop would make the backward pass build
+        # and sum T zero-padded (B, T, n) gradients, one per step
+        w_steps, r_steps = w.unbind(1), r.unbind(1)
+        z, p_diag = w_steps[0], r_steps[0]
+        P = torch.diag_embed(p_diag)
+        means, variances = [z], [p_diag]
+        gains = [self.transition.eye.expand(batch, n, n)] if return_gains else None
+        state = self.transition.initial_state(batch, w)
+        for t in range(1, steps):
+            F_t, q_t, state = self.transition(z, state)
+            z, P, K = kalman_step(z, P, F_t, q_t, w_steps[t], r_steps[t])
+            means.append(z)
+            variances.append(P.diagonal(dim1=-2, dim2=-1))
+            if gains is not None:
+                gains.append(K)
+        stacked_gains = torch.stack(gains, dim=1) if gains is not None else None
+        return torch.stack(means, dim=1), torch.stack(variances, dim=1), stacked_gains
+
+    def features(self, inputs, return_gains=False):
+        w, r = self.observe(inputs)
+        z, p_diag, gains = self.run_filter(w, r, return_gains)
+        return mean_and_log_variance(z, p_diag), gains

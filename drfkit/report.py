@@ -1,0 +1,126 @@
+"""Writing what a run produces: tables (CSV) and figures (PNG) under results/<profile>/,
+always atomically, plus the small plotting helpers the notebooks share."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from drfkit.io import atomic_savefig, atomic_write_csv
+from drfkit.paper import MODEL_COLORS, MODEL_LABELS
+from drfkit.paths import figures_dir, tables_dir
+
+
+def save_table(profile: str, name: str, frame: pd.DataFrame) -> Path:
+    """Write ``results/<profile>/tables/<name>.csv`` atomically and return its path."""
+    return atomic_write_csv(tables_dir(profile) / f"{name}.csv", frame)
+
+
+def save_figure(profile: str, name: str, fig) -> Path:
+    """Write ``results/<profile>/figures/<name>.png`` atomically and return its path."""
+    return atomic_savefig(figures_dir(profile) / f"{name}.png", fig)
+
+
+def label(model: str) -> str:
+    return MODEL_LABELS.get(model, model)
+
+
+def color(model: str) -> str:
+    return MODEL_COLORS.get(model, "gray")
+
+
+def new_figure(ncols: int = 1, nrows: int = 1, width: float = 4.5, height: float = 3.4, **kw):
+    fig, axes = plt.subplots(nrows, ncols, figsize=(width * ncols, height * nrows), squeeze=False, **kw)
+    return fig, axes
+
+
+def _paper_value(paper: dict, level: float, model: str) -> float:
+    for key, row in paper.items():
+        if abs(key - level) < 1e-9:
+            return row.get(model, float("nan"))
+    return float("nan")
+
+
+def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None = None, ylabel: str = "MAE",
+                  level_name: str = "noise", width: float = 6.0):
+    """Grouped bars of seed-mean MAE (95 % interval as error bar) per noise level and model;
+    the paper's value as a black tick on each bar. summary: ``drfkit.evaluate.summarise`` by model, noise."""
+    fig, axes = new_figure(1, width=width)
+    ax = axes[0, 0]
+    levels = sorted(summary["noise"].unique())
+    w = 0.8 / len(models)
+    for i, kind in enumerate(models):
+        rows = summary[summary["model"] == kind].set_index("noise").reindex(levels)
+        x = np.arange(len(levels)) + i * w
+        ax.bar(x, rows["mae"], w * 0.9, yerr=rows["mae_ci"].fillna(0), color=color(kind), label=label(kind))
+        if paper:
+            ax.scatter(x, [_paper_value(paper, lv, kind) for lv in levels], marker="_", s=300, color="black",
+                       zorder=3, label="paper" if i == 0 else None)
+    ax.set_xticks(np.arange(len(levels)) + 0.4 - w / 2)
+    ax.set_xticklabels([f"{level_name} {lv:g}" for lv in levels])
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def plot_picp_mpiw(curves: pd.DataFrame, models: list[str], paper: dict | None = None, per_level_paper: bool = False,
+                   level_name: str = "noise", nominal: float = 0.95):
+    """PICP (%) against MPIW as the dropout rate varies, one panel per noise level.
+
+    curves: ``summarise`` by model, noise, dropout_p. paper: model -> [(mpiw, picp%)] drawn on the
+    last panel, or (per_level_paper) level -> model -> points drawn on each panel.
+    """
+    levels = sorted(curves["noise"].unique())
+    fig, axes = new_figure(len(levels))
+    for ax, lv in zip(axes[0], levels):
+        for kind in models:
+            rows = curves[(curves["model"] == kind) & np.isclose(curves["noise"], lv)].sort_values("dropout_p")
+            ax.errorbar(rows["mpiw"], 100 * rows["picp"], xerr=rows["mpiw_ci"].fillna(0),
+                        yerr=100 * rows["picp_ci"].fillna(0), marker="o", ms=4, color=color(kind), label=label(kind))
+        pts = None
+        if paper and per_level_paper:
+            pts = next((v for k, v in paper.items() if abs(k - lv) < 1e-9), None)
+        elif paper and lv == levels[-1]:
+            pts = paper
+        for kind, xy in (pts or {}).items():
+            if kind in models:
+                ax.plot(*zip(*xy), "s--", ms=3, color=color(kind), alpha=0.35, label=f"paper {label(kind)}")
+        ax.axhline(100 * nominal, color="gray", lw=0.8, ls=":")
+        ax.set_title(f"{level_name} {lv:g}"); ax.set_xlabel("MPIW"); ax.set_ylabel("PICP (%)")
+    axes[0, -1].legend(fontsize=6)
+    return fig
+
+
+def plot_sweep(summary: pd.DataFrame, models: list[str], train_level: float, metrics=("mae", "picp"),
+               xlabel: str = "noise"):
+    """Metrics against test noise level (mean and 95 % band over seeds), training noise marked."""
+    fig, axes = new_figure(len(metrics))
+    for ax, metric in zip(axes[0], metrics):
+        scale = 100 if metric == "picp" else 1
+        for kind in models:
+            rows = summary[summary["model"] == kind].sort_values("noise")
+            ax.plot(rows["noise"], scale * rows[metric], "o-", ms=3, color=color(kind), label=label(kind))
+            if rows[f"{metric}_ci"].notna().any():
+                ax.fill_between(rows["noise"], scale * rows[f"{metric}_lo"], scale * rows[f"{metric}_hi"],
+                                color=color(kind), alpha=0.15)
+        ax.axvline(train_level, color="black", lw=0.8, ls="--", label="training noise")
+        ax.set_xlabel(xlabel); ax.set_ylabel(metric.upper() + (" (%)" if metric == "picp" else ""))
+    axes[0, 0].legend(fontsize=7)
+    return fig
+
+
+def plot_calibration(points: pd.DataFrame, models: list[str]):
+    """Observed against expected quantile coverage (Kuleshov et al. 2018), one panel per noise level.
+    points: columns model, noise, expected, observed (seed-averaged)."""
+    levels = sorted(points["noise"].unique())
+    fig, axes = new_figure(len(levels), width=3.6)
+    for ax, lv in zip(axes[0], levels):
+        ax.plot([0, 1], [0, 1], color="gray", lw=0.8, ls=":")
+        for kind in models:
+            rows = points[(points["model"] == kind) & np.isclose(points["noise"], lv)].sort_values("expected")
+            ax.plot(rows["expected"], rows["observed"], "o-", ms=3, color=color(kind), label=label(kind))
+        ax.set_title(f"noise {lv:g}"); ax.set_xlabel("expected quantile"); ax.set_ylabel("observed")
+    axes[0, 0].legend(fontsize=7)
+    return fig

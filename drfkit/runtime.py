@@ -1,0 +1,46 @@
+"""What every notebook does first: validate parameters, fix seeds and threads, pick the
+device, and open its manifest entry."""
+from __future__ import annotations
+
+import os
+import random
+from typing import Any
+
+import numpy as np
+import torch
+
+from drfkit.manifest import NotebookTimer
+from drfkit.params import Params, notebook_globals, validate
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def pick_device(device: str) -> torch.device:
+    """'auto' uses CUDA when present; 'cuda' without CUDA is an error, never a silent CPU run."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise RuntimeError("device 'cuda' was asked for but torch sees no GPU; use device: auto or cpu")
+    return torch.device(device)
+
+
+def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Params, NotebookTimer]:
+    """Validate the parameters defined in ``namespace`` (a notebook's ``globals()``).
+
+    Returns the validated parameters and a timer whose ``finish()`` the notebook's last
+    cell calls. Deterministic algorithms are requested so that a seed fixes the result
+    on CPU.
+    """
+    params = validate(notebook, notebook_globals(namespace))
+    if params.threads:
+        torch.set_num_threads(params.threads)
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    seed_everything(params.seeds[0])
+    pick_device(params.device)  # fail now, not after an hour of CPU training
+    timer = NotebookTimer(params.profile, notebook, params.as_dict())
+    return params, timer

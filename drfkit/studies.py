@@ -1,0 +1,159 @@
+"""The cached artefacts of each study, owned in one place.
+
+A notebook asks for what it needs (``pendulum_split(P, "test", 0.75)``,
+``train_models(P, "pendulum")``); if the artefact is on disk under its parameter hash it
+is loaded, otherwise it is built. So every notebook runs on its own, in any order, and
+shares work with the others when run in sequence.
+
+Seeds: data sets are fixed by ``*_data_seed`` (train = seed, val = seed + 1, test =
+seed + 2), the same for every model seed; each seed in ``P.seeds`` changes a model's
+initialisation, batch order and dropout masks.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import pandas as pd
+import torch
+
+from drfkit.io import atomic_write_csv, param_hash
+from drfkit.paths import data_dir, models_dir, tables_dir
+from drfkit.runtime import pick_device
+from drfkit.train import SequenceData, TrainConfig, TrainResult, history_frame, train_model
+
+SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
+
+
+# --------------------------------------------------------------------------- pendulum
+def pendulum_split(P, split: str, max_noise: float | None = None) -> dict[str, Any]:
+    """Arrays of a pendulum split (``max_noise`` defaults to the training noise)."""
+    from drfkit.data.pendulum import load_pendulum
+
+    n = {"train": P.pend_train_sequences, "val": P.pend_val_sequences, "test": P.pend_test_sequences}[split]
+    noise = P.pend_train_max_noise if max_noise is None else float(max_noise)
+    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, noise,
+                         P.pend_data_seed + SPLIT_SEED_OFFSET[split])
+
+
+def pendulum_data(P, split: str, max_noise: float | None = None) -> SequenceData:
+    arrays = pendulum_split(P, split, max_noise)
+    return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
+
+
+def _pendulum_data_key(P) -> dict[str, Any]:
+    return {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
+                                         "pend_train_max_noise", "pend_data_seed")}
+
+
+# ------------------------------------------------------------------------- pedestrians
+def pedestrian_records(P, noise_p: float) -> dict[str, Any]:
+    """Per-detection records at salt-and-pepper probability ``noise_p`` (all splits)."""
+    from drfkit.data.pedestrians import DetectorConfig, load_pedestrians
+
+    return load_pedestrians(
+        data_dir(P.profile), P.ped_source, noise_p, n_scenes=P.ped_n_scenes,
+        frames_per_scene=P.ped_frames_per_scene, seed=P.ped_data_seed,
+        detector=DetectorConfig.from_dict(P.sim_detector),
+        nuscenes_root=P.nuscenes_root or None, predictions_root=P.pifpaf_predictions or None,
+        nuscenes_version=P.nuscenes_version)
+
+
+def pedestrian_split(P, split: str, noise_p: float | None = None) -> dict[str, Any]:
+    """Sequences of one split (split by scene, the same scenes at every noise level)."""
+    from drfkit.data.records import make_sequences, split_by_scene
+
+    p = P.ped_train_p if noise_p is None else float(noise_p)
+    splits = split_by_scene(pedestrian_records(P, p), seed=P.ped_data_seed)
+    return make_sequences(splits[split], P.ped_seq_len)
+
+
+def pedestrian_data(P, split: str, noise_p: float | None = None) -> SequenceData:
+    seqs = pedestrian_split(P, split, noise_p)
+    return SequenceData(torch.from_numpy(seqs["inputs"]), torch.from_numpy(seqs["targets"]),
+                        torch.from_numpy(seqs["mask"]))
+
+
+def _pedestrian_data_key(P) -> dict[str, Any]:
+    return {k: getattr(P, k) for k in ("ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions",
+                                         "ped_n_scenes", "ped_frames_per_scene", "ped_train_p", "ped_seq_len",
+                                         "ped_data_seed", "sim_detector")}
+
+
+# ---------------------------------------------------------------------------- training
+STUDIES = {
+    "pendulum": {"input_kind": "pendulum", "out_dim": 2, "data": pendulum_data, "key": _pendulum_data_key},
+    "pedestrians": {"input_kind": "keypoints", "out_dim": 1, "data": pedestrian_data, "key": _pedestrian_data_key},
+}
+
+
+def study_models(P, study: str) -> list[str]:
+    return list(P.pend_models if study == "pendulum" else P.ped_models)
+
+
+def target_statistics(P) -> dict[str, float]:
+    """Mean and standard deviation of the training depths (valid frames), rounded to cm so
+    the configuration (and the checkpoint names hashed from it) is stable."""
+    train = pedestrian_data(P, "train")
+    depths = train.targets[train.mask] if train.mask is not None else train.targets
+    return {"target_offset": round(float(depths.mean()), 2), "target_scale": round(float(depths.std()), 2)}
+
+
+def model_config(study: str, kind: str, P=None) -> dict[str, Any]:
+    """The full configuration of ``kind`` in ``study``. For the DRF family on pedestrians
+    the decoder works in standardised depth units (``target_statistics`` of the training
+    split, which needs ``P``); Monoloco keeps its published design (metres directly)."""
+    from drfkit.models import default_config
+
+    spec = STUDIES[study]
+    overrides = {}
+    if study == "pedestrians" and kind != "monoloco" and P is not None:
+        overrides = target_statistics(P)
+    return default_config(kind, spec["input_kind"], spec["out_dim"], **overrides)
+
+
+def train_config(P, study: str, kind: str, seed: int) -> TrainConfig:
+    if study == "pendulum":
+        return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed)
+    if kind == "monoloco":  # Monoloco's own schedule (REFERENCE §3): StepLR(20, 0.9), single frames
+        return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
+                           seed=seed, lr_step=20, lr_gamma=0.9, framewise=True)
+    return TrainConfig(epochs=P.ped_epochs, lr=P.ped_lr, batch_size=P.ped_batch_size, seed=seed)
+
+
+def checkpoint_stem(P, study: str, kind: str, seed: int):
+    cfg = model_config(study, kind, P)
+    key = param_hash({"model": cfg, "train": vars(train_config(P, study, kind, seed)),
+                      "data": STUDIES[study]["key"](P)}, 8)
+    return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
+
+
+def train_models(P, study: str, progress: bool = True) -> dict[tuple[str, int], TrainResult]:
+    """Train (or load from cache / resume) every model of ``study`` for every seed.
+
+    Writes ``tables/<study>_training_curves.csv`` with one row per model, seed and epoch.
+    """
+    spec = STUDIES[study]
+    device = pick_device(P.device)
+    train, val = spec["data"](P, "train"), spec["data"](P, "val")
+    data_key = param_hash(spec["key"](P))
+    results, curves = {}, []
+    for kind in study_models(P, study):
+        for seed in P.seeds:
+            res = train_model(model_config(study, kind, P), train, val, train_config(P, study, kind, seed),
+                              checkpoint_stem(P, study, kind, seed), data_key=data_key, device=device,
+                              progress=progress)
+            results[(kind, seed)] = res
+            curve = history_frame(res.history)
+            curve.insert(0, "seed", seed)
+            curve.insert(0, "model", kind)
+            curves.append(curve)
+    atomic_write_csv(tables_dir(P.profile) / f"{study}_training_curves.csv", pd.concat(curves, ignore_index=True))
+    return results
+
+
+def trained_models(P, study: str, progress: bool = False) -> dict[tuple[str, int], Any]:
+    """The best checkpoint of every (model, seed), loaded in eval mode (trains what is missing)."""
+    from drfkit.train import load_checkpoint
+
+    device = pick_device(P.device)
+    return {key: load_checkpoint(res.best_path, device) for key, res in train_models(P, study, progress).items()}

@@ -1,0 +1,272 @@
+"""One training loop for every model of the book.
+
+Seeded, checkpointed every epoch (resumes after a kill with the same final result),
+best checkpoint kept on validation loss, non-finite losses stop the run with the
+step named. The loss is each model's own ``model.loss`` (Gaussian NLL over the
+sequence for the DRF family, relative Laplace for Monoloco).
+
+Determinism: the model is initialised under ``torch.manual_seed(seed)``; the batch order
+of epoch ``e`` comes from a generator seeded with ``(seed, e)``; the global RNG that
+drives dropout is saved in the checkpoint and restored on resume. So an interrupted
+and resumed run equals an uninterrupted one on CPU.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from drfkit.io import CorruptArtefactError, atomic_torch_save, param_hash, torch_load_checked
+
+CHECKPOINT_FORMAT = 1
+
+
+class NonFiniteLossError(RuntimeError):
+    """The loss or a gradient became NaN/inf; the last good checkpoint is kept."""
+
+
+@dataclass
+class SequenceData:
+    """A data set of sequences, as tensors.
+
+    inputs:  (N, T, ...) uint8 images (N, T, 24, 24) or float keypoints (N, T, 17, 3)
+    targets: (N, T, out) float32
+    mask:    (N, T) bool, True on real frames (False on padding); None = all real
+    """
+
+    inputs: torch.Tensor
+    targets: torch.Tensor
+    mask: torch.Tensor | None = None
+
+    def __post_init__(self) -> None:
+        self.inputs = torch.as_tensor(self.inputs)
+        self.targets = torch.as_tensor(self.targets, dtype=torch.float32)
+        if self.targets.ndim == 2:
+            self.targets = self.targets.unsqueeze(-1)
+        if self.mask is not None:
+            self.mask = torch.as_tensor(self.mask, dtype=torch.bool)
+        n, t = self.targets.shape[:2]
+        if len(self) == 0:
+            raise ValueError("empty data set: no sequences to train or evaluate on")
+        if self.inputs.shape[:2] != (n, t):
+            raise ValueError(f"inputs {tuple(self.inputs.shape)} and targets {tuple(self.targets.shape)} "
+                             "disagree on (N, T)")
+        if self.mask is not None and self.mask.shape != (n, t):
+            raise ValueError(f"mask {tuple(self.mask.shape)} must be (N, T) = {(n, t)}")
+        if self.inputs.is_floating_point() and not torch.isfinite(self.inputs).all():
+            raise ValueError("inputs contain NaN or inf; zero missing keypoints with confidence 0 instead")
+        if not torch.isfinite(self.targets).all():
+            raise ValueError("targets contain NaN or inf")
+
+    def __len__(self) -> int:
+        return self.targets.shape[0]
+
+    def frames(self) -> "SequenceData":
+        """Every real frame as its own length-1 sequence (for single-frame models)."""
+        keep = self.mask.reshape(-1) if self.mask is not None else slice(None)
+        flat = lambda x: x.reshape(-1, 1, *x.shape[2:])[keep]  # noqa: E731
+        return SequenceData(flat(self.inputs), flat(self.targets), None)
+
+    def batch(self, idx: torch.Tensor, device: torch.device):
+        mask = None if self.mask is None else self.mask[idx].to(device)
+        return self.inputs[idx].to(device), self.targets[idx].to(device), mask
+
+
+@dataclass
+class TrainConfig:
+    epochs: int
+    lr: float
+    batch_size: int
+    seed: int
+    grad_clip: float = 10.0
+    lr_step: int | None = None  # StepLR step (epochs); None = constant lr
+    lr_gamma: float = 1.0
+    framewise: bool = False  # train on single frames (Monoloco)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
+                raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if not (0 < self.lr < 1):
+            raise ValueError(f"TrainConfig.lr must be in (0, 1), got {self.lr!r}")
+
+
+@dataclass
+class TrainResult:
+    best_path: Path
+    last_path: Path
+    history: list[dict[str, float]] = field(default_factory=list)
+    best_epoch: int = 0
+    best_val_loss: float = math.inf
+    resumed_from: int = 0
+
+
+def _epoch_order(n: int, seed: int, epoch: int) -> torch.Tensor:
+    gen = torch.Generator().manual_seed(seed * 100_003 + epoch)
+    return torch.randperm(n, generator=gen)
+
+
+@torch.no_grad()
+def evaluate_loss(model, data: SequenceData, batch_size: int, device: torch.device) -> float:
+    """Mean loss over ``data`` in eval mode (dropout off), weighted by batch frames."""
+    model.eval()
+    total, weight = 0.0, 0
+    for start in range(0, len(data), batch_size):
+        idx = torch.arange(start, min(start + batch_size, len(data)))
+        inputs, targets, mask = data.batch(idx, device)
+        mean, sigma = model(inputs)
+        w = int(mask.sum()) if mask is not None else targets.shape[0] * targets.shape[1]
+        total += float(model.loss(mean, sigma, targets, mask)) * w
+        weight += w
+    return total / max(weight, 1)
+
+
+def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -> str:
+    """What a resume must agree on. The epoch count is left out: epoch e of a longer run is
+    identical to epoch e of a shorter one, so a finished run can be extended."""
+    train = {k: v for k, v in vars(train_cfg).items() if k != "epochs"}
+    return param_hash({"model": config, "train": train, "data": data_key})
+
+
+def train_model(
+    model_config: dict[str, Any],
+    train: SequenceData,
+    val: SequenceData,
+    cfg: TrainConfig,
+    checkpoint_stem: str | Path,
+    *,
+    data_key: str = "",
+    device: torch.device | str = "cpu",
+    progress: bool = True,
+    stop_after_epochs: int | None = None,
+) -> TrainResult:
+    """Train ``build_model(model_config)``; checkpoints at ``<stem>-last.pt`` / ``<stem>-best.pt``.
+
+    If ``<stem>-last.pt`` exists and was made by the same configuration (its fingerprint
+    matches), training resumes from it; a finished run returns at once. ``stop_after_epochs``
+    ends the call early (as an interruption would), used by tests and by time-boxed runs.
+    """
+    from drfkit.models import build_model
+
+    device = torch.device(device)
+    stem = Path(checkpoint_stem)
+    last_path, best_path = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
+    fp = fingerprint(model_config, cfg, data_key)
+    if cfg.framewise:
+        train, val = train.frames(), val.frames()
+
+    torch.manual_seed(cfg.seed)
+    model = build_model(model_config).to(device)
+    optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
+    result = TrainResult(best_path=best_path, last_path=last_path)
+    start_epoch = 0
+
+    if last_path.exists():
+        state = torch_load_checked(last_path)
+        if state.get("fingerprint") != fp:
+            raise CorruptArtefactError(
+                f"checkpoint {last_path} was written by a different configuration "
+                f"(fingerprint {state.get('fingerprint')} != {fp}); delete it to retrain")
+        model.load_state_dict(state["model"])
+        optimiser.load_state_dict(state["optimiser"])
+        scheduler.load_state_dict(state["scheduler"])
+        torch.set_rng_state(state["rng_torch"])
+        start_epoch = state["epoch"]
+        result.history = state["history"]
+        result.best_epoch, result.best_val_loss = state["best_epoch"], state["best_val_loss"]
+        result.resumed_from = start_epoch
+        if start_epoch >= cfg.epochs and best_path.exists():
+            return result  # finished: a cache hit
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=cfg.epochs, initial=start_epoch, desc=stem.name, mininterval=2.0,
+                   file=sys.stderr, leave=False)
+    end_epoch = cfg.epochs if stop_after_epochs is None else min(cfg.epochs, start_epoch + stop_after_epochs)
+    for epoch in range(start_epoch, end_epoch):
+        t0 = time.perf_counter()
+        model.train()
+        order = _epoch_order(len(train), cfg.seed, epoch)
+        total, count = 0.0, 0
+        for step, start in enumerate(range(0, len(train), cfg.batch_size)):
+            idx = order[start:start + cfg.batch_size]
+            inputs, targets, mask = train.batch(idx, device)
+            mean, sigma = model(inputs)
+            loss = model.loss(mean, sigma, targets, mask)
+            if not torch.isfinite(loss):
+                raise NonFiniteLossError(
+                    f"non-finite loss {loss.item()} at epoch {epoch + 1}, step {step} (sequences "
+                    f"{idx[:8].tolist()}...); the last good checkpoint {last_path} is kept")
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            if not torch.isfinite(grad_norm):
+                raise NonFiniteLossError(
+                    f"non-finite gradient at epoch {epoch + 1}, step {step} (sequences "
+                    f"{idx[:8].tolist()}...); the last good checkpoint {last_path} is kept")
+            optimiser.step()
+            total += loss.item() * len(idx)
+            count += len(idx)
+        scheduler.step()
+        train_loss = total / count
+        val_loss = evaluate_loss(model, val, max(cfg.batch_size, 256), device)
+        result.history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
+                               "lr": optimiser.param_groups[0]["lr"], "seconds": time.perf_counter() - t0})
+        if val_loss < result.best_val_loss:
+            result.best_val_loss, result.best_epoch = val_loss, epoch + 1
+            atomic_torch_save(best_path, {
+                "format": CHECKPOINT_FORMAT, "config": model_config, "state_dict": model.state_dict(),
+                "meta": {"epoch": epoch + 1, "val_loss": val_loss, "seed": cfg.seed, "fingerprint": fp,
+                         "train": vars(cfg), "data": data_key}})
+        atomic_torch_save(last_path, {
+            "format": CHECKPOINT_FORMAT, "fingerprint": fp, "epoch": epoch + 1,
+            "model": model.state_dict(), "optimiser": optimiser.state_dict(),
+            "scheduler": scheduler.state_dict(), "rng_torch": torch.get_rng_state(),
+            "history": result.history, "best_epoch": result.best_epoch,
+            "best_val_loss": result.best_val_loss})
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(train=f"{train_loss:.3f}", val=f"{val_loss:.3f}", refresh=False)
+    if bar is not None:
+        bar.close()
+    return result
+
+
+def load_checkpoint(path: str | Path, device: torch.device | str = "cpu"):
+    """Rebuild the model of a ``*-best.pt`` checkpoint, in eval mode.
+
+    A truncated or corrupt file raises ``CorruptArtefactError`` naming the file.
+    """
+    from drfkit.models import build_model
+
+    state = torch_load_checked(path)
+    if not isinstance(state, dict) or "config" not in state or "state_dict" not in state:
+        raise CorruptArtefactError(
+            f"{path} is not a drfkit model checkpoint (expected keys 'config' and 'state_dict'; "
+            "a '-last.pt' file is a resume state: load the '-best.pt' one)")
+    model = build_model(state["config"])
+    model.load_state_dict(state["state_dict"])
+    model.checkpoint_meta = state.get("meta", {})
+    return model.to(device).eval()
+
+
+def history_frame(history: list[dict[str, float]]):
+    import pandas as pd
+
+    return pd.DataFrame(history, columns=["epoch", "train_loss", "val_loss", "lr", "seconds"])
+
+
+def count_parameters(model) -> int:
+    return int(sum(p.numel() for p in model.parameters()))
+
+
+__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model",
+           "load_checkpoint", "evaluate_loss", "history_frame", "count_parameters"]

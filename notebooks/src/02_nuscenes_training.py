@@ -1,0 +1,81 @@
+# %% [markdown]
+# # 02 · Pedestrians: training DRF, the baselines and Monoloco
+#
+# The second experiment estimates the depth z of pedestrians from their 17 COCO keypoints
+# (PifPaf on nuScenes images in the paper). Keypoints are back-projected with each image's own
+# intrinsics to normalised camera coordinates (10 · K⁻¹ [u, v, 1], as Monoloco does) and, with
+# their confidences, form the 17 × 3 input of every model. The target is **depth z** in the camera
+# frame (the paper's choice; Monoloco itself predicts the Euclidean distance).
+#
+# * **DRF, no_dynamics, LSTM** share a keypoint encoder and the pendulum study's heads and decoder;
+#   they read tracks cut into sequences of `ped_seq_len` keyframes (2 Hz), trained with the
+#   Gaussian NLL at salt-and-pepper p = 0.01 (paper: Adam 1e-4, 200 epochs; batch size is ours).
+# * **Monoloco** (ICCV 2019) is the single-frame baseline: 0.41 M parameters, relative Laplace
+#   loss, its own schedule (Adam 2e-3, batch 256, StepLR 20/0.9, 150 epochs), trained on frames.
+#
+# Unless `ped_source = "nuscenes"`, the records come from the simulated nuScenes-like source
+# (`drfkit.data.pedestrians`): its keypoint detector **stands in for PifPaf on noisy images**,
+# so absolute errors are not comparable with the paper's; the comparison between models is.
+
+# %% tags=["parameters"]
+
+# %%
+from drfkit.runtime import start_notebook
+
+P, timer = start_notebook("02_nuscenes_training", globals())
+
+# %%
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from drfkit import studies
+from drfkit.evaluate import evaluate_study, summarise
+from drfkit.paper import PEDESTRIAN_MAE
+from drfkit.report import color, label, new_figure, plot_mae_bars, save_figure, save_table
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+results = studies.train_models(P, "pedestrians")
+curves = pd.read_csv(studies.tables_dir(P.profile) / "pedestrians_training_curves.csv")
+curves.groupby("model")[["train_loss", "val_loss", "seconds"]].last()
+
+# %%
+assert set(curves["model"]) == set(P.ped_models) and set(curves["seed"]) == set(P.seeds)
+assert np.isfinite(curves[["train_loss", "val_loss"]].to_numpy()).all()
+print(f"{len(results)} runs; checkpoints in results/{P.profile}/models/")
+
+# %%
+fig, axes = new_figure(2)
+for (kind, seed), run in curves.groupby(["model", "seed"]):
+    ax = axes[0, 1] if kind == "monoloco" else axes[0, 0]
+    ax.plot(run["epoch"], run["val_loss"], color=color(kind), alpha=0.7,
+            label=label(kind) if seed == P.seeds[0] else None)
+axes[0, 0].set_title("validation Gaussian NLL"); axes[0, 1].set_title("Monoloco: validation Laplace loss")
+for ax in axes[0]:
+    ax.set_xlabel("epoch"); ax.legend(fontsize=8)
+save_figure(P.profile, "pedestrians_training_curves", fig)
+plt.show()
+
+# %% [markdown]
+# ## In-distribution accuracy (p = 0.01)
+# Depth MAE in metres on the test scenes, mean over seeds with a 95 % t-interval. Out-of-distribution
+# levels are the subject of notebook 03.
+
+# %%
+evals = evaluate_study(P, "pedestrians", [P.ped_train_p])
+summary = summarise(evals, ["model", "noise"])
+save_table(P.profile, "pedestrians_in_distribution", summary)
+assert len(evals) == len(P.ped_models) * len(P.seeds) and (evals["mae"] > 0).all()
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+summary[["model", "n_seeds", "mae", "mae_ci", "picp", "mpiw", "nll"]].round(3)
+
+# %%
+fig = plot_mae_bars(summary, P.ped_models, PEDESTRIAN_MAE, ylabel="depth MAE (m)", level_name="p", width=5)
+save_figure(P.profile, "pedestrians_in_distribution_mae", fig)
+plt.show()
+
+# %%
+_ = timer.finish()

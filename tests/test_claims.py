@@ -1,0 +1,132 @@
+"""The verdict logic, fed synthetic results with known answers."""
+import math
+
+import pandas as pd
+import pytest
+
+from drfkit import claims
+from drfkit.evaluate import summarise, t975
+
+
+def mae_table(values: dict, ci: float = 0.001) -> pd.DataFrame:
+    rows = []
+    for (model, noise), m in values.items():
+        rows.append({"model": model, "noise": noise, "mae": m, "mae_ci": ci, "mae_lo": m - ci, "mae_hi": m + ci})
+    return pd.DataFrame(rows)
+
+
+def pend(drf, lstm, nod):
+    return mae_table({("drf", 0.5): drf[0], ("lstm", 0.5): lstm[0], ("no_dynamics", 0.5): nod[0],
+                      ("drf", 0.75): drf[1], ("lstm", 0.75): lstm[1], ("no_dynamics", 0.75): nod[1]})
+
+
+def test_c1_verdicts():
+    assert claims.c1_pendulum_mae_ordering(pend((1, 2), (2, 3), (3, 4)))["verdict"] == claims.REPRODUCED
+    # ordering at one level only
+    assert claims.c1_pendulum_mae_ordering(pend((1, 2), (2, 4), (3, 3)))["verdict"] == claims.PARTLY
+    # DRF best but LSTM worse than no_dynamics everywhere
+    assert claims.c1_pendulum_mae_ordering(pend((1, 1), (3, 3), (2, 2)))["verdict"] == claims.PARTLY
+    assert claims.c1_pendulum_mae_ordering(pend((3, 3), (2, 2), (1, 1)))["verdict"] == claims.NOT
+
+
+def curve(points: dict, noise=0.5) -> pd.DataFrame:
+    return pd.DataFrame([{"model": m, "noise": noise, "mpiw": x, "picp": y} for m, pts in points.items()
+                         for x, y in pts])
+
+
+def test_c2_dominance():
+    base = [(1.0, 0.90), (2.0, 0.95), (3.0, 0.98)]
+    above = [(1.5, 0.96), (2.5, 0.99)]
+    below = [(1.5, 0.90), (2.5, 0.93)]
+    mixed = [(1.5, 0.96), (2.5, 0.93)]
+    mk = lambda drf: pd.concat([curve({"drf": drf, "lstm": base, "no_dynamics": base}, n) for n in (0.5, 0.75)])
+    assert claims.c2_pendulum_picp_mpiw(mk(above))["verdict"] == claims.REPRODUCED
+    assert claims.c2_pendulum_picp_mpiw(mk(mixed))["verdict"] == claims.PARTLY
+    assert claims.c2_pendulum_picp_mpiw(mk(below))["verdict"] == claims.NOT
+    assert claims.dominance(curve({"drf": mixed, "lstm": base}), "drf", "lstm") == 0.5
+
+
+def ped(drf, nod, lstm, mono, ci=0.01):
+    vals = {}
+    for i, lv in enumerate((0.01, 0.025, 0.05)):
+        vals.update({("drf", lv): drf[i], ("no_dynamics", lv): nod[i], ("lstm", lv): lstm[i],
+                     ("monoloco", lv): mono[i]})
+    return mae_table(vals, ci)
+
+
+def test_c3_improvement_and_verdicts():
+    table = ped((2.5, 2.0, 2.5), (3, 2.5, 3.0), (3, 2.2, 2.8), (2.5, 2.1, 2.6))
+    gain, lo, hi = claims.improvement(table, "no_dynamics", (0.025, 0.05))
+    assert gain == pytest.approx(((1 - 2.0 / 2.5) + (1 - 2.5 / 3.0)) / 2)
+    assert lo < gain < hi
+    assert claims.c3_pedestrian_ood_gain(table)["verdict"] == claims.REPRODUCED
+    # DRF better than no_dynamics only
+    table = ped((2.5, 2.3, 2.9), (3, 2.5, 3.0), (3, 2.2, 2.8), (2.5, 2.1, 2.6))
+    assert claims.c3_pedestrian_ood_gain(table)["verdict"] == claims.PARTLY
+    # huge intervals: improvement not significant anywhere though positive
+    table = ped((2.5, 2.0, 2.5), (3, 2.5, 3.0), (3, 2.2, 2.8), (2.5, 2.1, 2.6), ci=1.0)
+    assert claims.c3_pedestrian_ood_gain(table)["verdict"] == claims.PARTLY
+    table = ped((3.5, 3.0, 3.5), (3, 2.5, 3.0), (3, 2.2, 2.8), (2.5, 2.1, 2.6))
+    assert claims.c3_pedestrian_ood_gain(table)["verdict"] == claims.NOT
+
+
+def test_c4_parity():
+    mk = lambda d, m: ped((d, 1, 1), (1, 1, 1), (1, 1, 1), (m, 1, 1))
+    assert claims.c4_in_distribution_parity(mk(2.6, 2.5))["verdict"] == claims.REPRODUCED
+    assert claims.c4_in_distribution_parity(mk(2.0, 2.5))["verdict"] == claims.REPRODUCED  # better counts
+    assert claims.c4_in_distribution_parity(mk(3.0, 2.5))["verdict"] == claims.PARTLY
+    assert claims.c4_in_distribution_parity(mk(4.0, 2.5))["verdict"] == claims.NOT
+
+
+def test_c5_both_higher_picp_and_narrower():
+    def table(drf_picp, drf_mpiw):
+        rows = [{"study": "pedestrians", "model": "drf", "noise": 0.05, "picp": drf_picp, "mpiw": drf_mpiw}]
+        rows += [{"study": "pedestrians", "model": b, "noise": 0.05, "picp": 0.9, "mpiw": 10.0}
+                 for b in ("lstm", "monoloco")]
+        return pd.DataFrame(rows)
+
+    conds, bases = [("pedestrians", 0.05)], {"pedestrians": ["lstm", "monoloco"]}
+    assert claims.c5_intervals_under_shift(table(0.95, 9.0), conds, bases)["verdict"] == claims.REPRODUCED
+    assert claims.c5_intervals_under_shift(table(0.95, 11.0), conds, bases)["verdict"] == claims.PARTLY
+    assert claims.c5_intervals_under_shift(table(0.85, 11.0), conds, bases)["verdict"] == claims.NOT
+
+
+def test_c6_speedup_thresholds():
+    assert claims.c6_speedup(3.1)["verdict"] == claims.REPRODUCED
+    assert claims.c6_speedup(2.0)["verdict"] == claims.PARTLY
+    assert claims.c6_speedup(1.1)["verdict"] == claims.NOT
+
+
+def gating(study, kg, rnd, always, kg_time=10.0, always_time=20.0):
+    return pd.DataFrame([
+        {"study": study, "setting": "no_dropout", "picp": 0.8, "time_ms": 1.0},
+        {"study": study, "setting": "random", "picp": rnd, "time_ms": kg_time},
+        {"study": study, "setting": "kalman_gain", "picp": kg, "time_ms": kg_time},
+        {"study": study, "setting": "always", "picp": always, "time_ms": always_time}])
+
+
+def test_c7_gating():
+    assert claims.c7_gating(gating("pendulum", 0.92, 0.86, 0.93), "pendulum")["verdict"] == claims.REPRODUCED
+    assert claims.c7_gating(gating("pendulum", 0.92, 0.86, 0.93, 19.0), "pendulum")["verdict"] == claims.PARTLY
+    assert claims.c7_gating(gating("pendulum", 0.85, 0.86, 0.93, 19.0), "pendulum")["verdict"] == claims.NOT
+    assert claims.c7_gating(gating("pedestrians", 0.877, 0.874, 0.9), "pedestrians")["verdict"] == claims.REPRODUCED
+    assert claims.c7_gating(gating("pedestrians", 0.95, 0.874, 0.9), "pedestrians")["verdict"] == claims.NOT
+
+
+def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    claims.upsert("t", [claims.c6_speedup(3.0)])
+    claims.upsert("t", [claims.c6_speedup(1.0), claims.c4_in_distribution_parity(
+        ped((2.6, 1, 1), (1, 1, 1), (1, 1, 1), (2.5, 1, 1)))])
+    table = pd.read_csv(tmp_path / "t" / "claims.csv")
+    assert list(table["id"]) == ["C4", "C6"]
+    assert table.set_index("id").loc["C6", "verdict"] == claims.NOT
+    assert "| C6 |" in (tmp_path / "t" / "claims.md").read_text()
+
+
+def test_summarise_t_interval():
+    frame = pd.DataFrame({"model": ["a"] * 3 + ["b"], "mae": [1.0, 2.0, 3.0, 5.0]})
+    s = summarise(frame, ["model"], ["mae"]).set_index("model")
+    assert s.loc["a", "mae"] == 2.0 and s.loc["a", "n_seeds"] == 3
+    assert s.loc["a", "mae_ci"] == pytest.approx(t975(2) * 1.0 / math.sqrt(3))
+    assert math.isnan(s.loc["b", "mae_ci"])

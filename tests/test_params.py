@@ -1,0 +1,133 @@
+"""Parameter validation: the schema, the YAML profiles and the notebooks agree, and a wrong
+parameter fails fast with a message naming the key, the notebook and the allowed values."""
+import json
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from drfkit.params import NOTEBOOKS, SPECS, ParameterError, load_profile, notebook_params, validate
+from drfkit.paths import NOTEBOOKS_DIR, PARAMS_DIR, REPO_ROOT
+
+
+def quick_subset(nb):
+    return {k: load_profile("quick")[k] for k in NOTEBOOKS[nb]}
+
+
+@pytest.mark.parametrize("profile", ["quick", "paper"])
+def test_profiles_are_complete_and_valid(profile):
+    values = load_profile(profile)
+    assert set(values) == set(SPECS)  # every parameter set explicitly, none unknown
+    for nb in NOTEBOOKS:
+        notebook_params(nb, values)
+
+
+def test_paper_profile_is_paper_scale():
+    paper = load_profile("paper")
+    assert paper["pend_train_sequences"] == 2000 and paper["pend_test_sequences"] == 1000
+    assert paper["pend_seq_len"] == 75 and paper["pend_epochs"] == 200 and paper["pend_lr"] == 1e-4
+    assert len(paper["seeds"]) >= 3
+    assert paper["pend_eval_max_noise"] == [0.5, 0.75] and paper["ped_eval_p"] == [0.01, 0.025, 0.05]
+
+
+def _parameters_cells(nb_path):
+    nb = json.loads(nb_path.read_text())
+    return [c for c in nb["cells"] if "parameters" in c.get("metadata", {}).get("tags", [])]
+
+
+@pytest.mark.parametrize("name", list(NOTEBOOKS))
+def test_notebook_defaults_are_the_quick_profile(name):
+    path = NOTEBOOKS_DIR / f"{name}.ipynb"
+    cells = _parameters_cells(path)
+    assert len(cells) == 1, f"{path} needs exactly one cell tagged 'parameters'"
+    namespace: dict = {}
+    exec("".join(cells[0]["source"]), namespace)
+    namespace.pop("__builtins__")
+    assert namespace == quick_subset(name)
+
+
+def test_unknown_key_names_key_notebook_and_allowed():
+    values = quick_subset("01_pendulum_training") | {"pend_epoch": 3}
+    with pytest.raises(ParameterError) as err:
+        validate("01_pendulum_training", values)
+    msg = str(err.value)
+    assert "pend_epoch" in msg and "01_pendulum_training" in msg and "pend_epochs" in msg
+
+
+@pytest.mark.parametrize("key, value, fragment", [
+    ("pend_epochs", "10", "must be an integer"),
+    ("pend_epochs", 2.5, "must be an integer"),
+    ("pend_epochs", True, "must be an integer"),
+    ("pend_epochs", 0, "out of range"),
+    ("pend_train_max_noise", -0.1, "out of range"),
+    ("pend_train_max_noise", 1.5, "out of range"),
+    ("pend_train_sequences", 0, "out of range"),
+    ("n_samples", 0, "out of range"),
+    ("seeds", [], "out of range"),
+    ("seeds", [1, 1], "out of range"),
+    ("pend_models", ["drf", "kalmannet"], "out of range"),
+    ("dropout_rates", [0.1, 1.0], "out of range"),
+    ("device", "tpu", "out of range"),
+    ("pend_lr", float("nan"), "finite number"),
+])
+def test_wrong_type_or_range_names_the_key(key, value, fragment):
+    values = quick_subset("01_pendulum_training") | {key: value}
+    with pytest.raises(ParameterError) as err:
+        validate("01_pendulum_training", values)
+    assert key in str(err.value) and fragment in str(err.value) and "allowed" in str(err.value)
+
+
+def test_missing_parameter_is_reported():
+    values = quick_subset("04_timing")
+    del values["n_samples"]
+    with pytest.raises(ParameterError, match="n_samples"):
+        validate("04_timing", values)
+
+
+def test_bad_detector_config_is_rejected():
+    values = quick_subset("02_nuscenes_training") | {"sim_detector": {"no_such_field": 1}}
+    with pytest.raises(ParameterError, match="sim_detector"):
+        validate("02_nuscenes_training", values)
+
+
+def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
+    bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"pend_epohcs": 3}
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(bad))
+    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "pend_epohcs" in proc.stderr and "unknown parameter" in proc.stderr
+    assert "== 00_data_prep" not in proc.stdout
+
+
+def test_yaml_with_wrong_type_names_notebook_and_key(tmp_path):
+    bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"pend_epochs": "many"}
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(bad))
+    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "pend_epochs" in proc.stderr and "notebook 01_pendulum_training" in proc.stderr
+
+
+def test_missing_profile_lists_known_ones():
+    with pytest.raises(ParameterError, match="known profiles"):
+        load_profile("no_such_profile")
+
+
+def test_notebook_stops_in_its_first_cell_on_an_unknown_parameter(tmp_path):
+    """The real thing: papermill injects an unknown key; the validation cell raises."""
+    import papermill as pm
+
+    out = tmp_path / "out.ipynb"
+    with pytest.raises(pm.PapermillExecutionError) as err:
+        pm.execute_notebook(str(NOTEBOOKS_DIR / "04_timing.ipynb"), str(out),
+                            parameters={"n_sample": 25, "profile": "test-params"},
+                            progress_bar=False, kernel_name="python3", cwd=str(NOTEBOOKS_DIR))
+    assert "n_sample" in str(err.value) and "04_timing" in str(err.value)
+    nb = json.loads(out.read_text())
+    executed = [c for c in nb["cells"] if c["cell_type"] == "code" and c.get("execution_count")]
+    # parameters, injected parameters, validation: nothing after the validation cell ran
+    assert len(executed) <= 3

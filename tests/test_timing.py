@@ -1,0 +1,199 @@
+"""drfkit.timing: the inference benchmark's table, its streaming step and its modes, the CLI."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+import yaml
+
+from drfkit import timing
+from drfkit.models import parts
+from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
+                           inference_benchmark, initial_carry, make_frame_fn, step_features)
+
+TINY = dict(n_samples=3, batch_sizes=[1, 2], threads=[1], min_run_time=0.01)
+
+
+@pytest.fixture(scope="module")
+def tiny_table() -> pd.DataFrame:
+    return inference_benchmark(device="auto", **TINY)
+
+
+def expected_cells(devices):
+    return {(study, kind, mode, batch, dev) for dev in devices for study, (_, _, kinds) in STUDIES.items()
+            for kind in kinds for mode in MODES[kind] for batch in TINY["batch_sizes"]}
+
+
+def test_table_has_every_model_mode_batch_once(tiny_table):
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    assert list(tiny_table.columns) == COLUMNS
+    cells = list(zip(tiny_table["study"], tiny_table["model"], tiny_table["mode"], tiny_table["batch"],
+                     tiny_table["device"]))
+    assert len(cells) == len(set(cells)) and set(cells) == expected_cells(devices)
+    assert set(tiny_table["threads"]) == {1}
+    if not torch.cuda.is_available():
+        assert set(tiny_table["device"]) == {"cpu"}
+    assert (tiny_table["median_ms_per_frame"] > 0).all() and np.isfinite(tiny_table["median_ms_per_frame"]).all()
+    assert (tiny_table["iqr_ms_per_frame"] >= 0).all()
+    np.testing.assert_allclose(tiny_table["median_ms_per_call"],
+                               tiny_table["median_ms_per_frame"] * tiny_table["batch"], rtol=1e-12)
+    sampled = tiny_table["mode"] != "no_sampling"
+    assert (tiny_table.loc[sampled, "n_samples"] == TINY["n_samples"]).all()
+    assert (tiny_table.loc[~sampled, "n_samples"] == 0).all()
+
+
+def test_ratios_divide_medians_within_the_same_group(tiny_table):
+    ped = tiny_table[tiny_table["study"] == "pedestrians"]
+    for (batch, threads, dev), group in ped.groupby(["batch", "threads", "device"]):
+        base = group[(group["model"] == "monoloco") & (group["mode"] == "published")]["median_ms_per_frame"]
+        assert len(base) == 1
+        np.testing.assert_allclose(group["ratio_to_monoloco_published"],
+                                   group["median_ms_per_frame"] / base.iloc[0], rtol=1e-12)
+        for kind, rows in group.groupby("model"):
+            det = rows[rows["mode"] == "no_sampling"]["median_ms_per_frame"].iloc[0]
+            np.testing.assert_allclose(rows["ratio_to_no_sampling"], rows["median_ms_per_frame"] / det, rtol=1e-12)
+    assert tiny_table[tiny_table["study"] == "pendulum"]["ratio_to_monoloco_published"].isna().all()
+    assert (tiny_table[tiny_table["mode"] == "no_sampling"]["ratio_to_no_sampling"] == 1.0).all()
+
+
+def test_add_ratios_never_mixes_groups():
+    # two thread counts with different Monoloco times: each row must use its own group's
+    rows = []
+    for threads, mono, drf in ((1, 10.0, 2.0), (2, 4.0, 2.0)):
+        for model, mode, ms in (("monoloco", "published", mono), ("monoloco", "no_sampling", mono / 20),
+                                ("drf", "batched", drf), ("drf", "no_sampling", drf / 2)):
+            rows.append({"study": "pedestrians", "model": model, "mode": mode, "n_samples": 25, "batch": 1,
+                         "threads": threads, "device": "cpu", "median_ms_per_frame": ms,
+                         "iqr_ms_per_frame": 0.0, "median_ms_per_call": ms, "load_1min": math.nan})
+    rows.append({**rows[-1], "study": "pendulum"})  # a pendulum DRF pass: no Monoloco to divide by
+    out = add_ratios(pd.DataFrame(rows))
+    drf = out[(out["study"] == "pedestrians") & (out["model"] == "drf") & (out["mode"] == "batched")]
+    assert drf["ratio_to_monoloco_published"].tolist() == [0.2, 0.5]
+    assert drf["ratio_to_no_sampling"].tolist() == [2.0, 2.0]
+    assert math.isnan(out[out["study"] == "pendulum"]["ratio_to_monoloco_published"].iloc[0])
+    assert timing.speedup_vs_monoloco(out, batch=1, threads=2, device="cpu") == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="more than one"):
+        add_ratios(pd.DataFrame(rows + [rows[0]]))
+
+
+@pytest.mark.parametrize("study,kind", [("pedestrians", "drf"), ("pedestrians", "lstm"),
+                                        ("pedestrians", "no_dynamics"), ("pedestrians", "monoloco"),
+                                        ("pendulum", "drf")])
+def test_streaming_steps_reproduce_the_whole_sequence(study, kind):
+    model = build_timing_model(kind, study)
+    seq = example_frames(study, batch=3, n_frames=5, seed=1)
+    with torch.no_grad():
+        whole, _ = model.features(seq)
+        carry = initial_carry(model, seq[:, :1])
+        steps = [whole[:, :1]]
+        for t in range(1, seq.shape[1]):
+            h, carry = step_features(model, seq[:, t:t + 1], carry)
+            steps.append(h)
+    torch.testing.assert_close(torch.cat(steps, dim=1), whole, rtol=1e-4, atol=1e-5)
+
+
+class MaskBank:
+    """Stand-in for ``parts.mc_dropout`` that hands out pre-drawn masks in order, so the
+    batched (one call, S masks) and sequential (S calls, one mask each) paths see the
+    same dropout masks."""
+
+    def __init__(self, n_samples, shape, p, seed=0):
+        gen = torch.Generator().manual_seed(seed)
+        self.masks = (torch.rand(n_samples, *shape, generator=gen) > p).float() / (1 - p)
+        self.used = 0
+
+    def __call__(self, h, n_samples, p):
+        masks = self.masks[self.used:self.used + n_samples]
+        self.used += n_samples
+        return h.unsqueeze(0) * masks
+
+
+@pytest.mark.parametrize("study", ["pedestrians", "pendulum"])
+def test_drf_modes_agree_given_the_same_masks_and_filter_once(study, monkeypatch):
+    n_samples, batch = 4, 3
+    model = build_timing_model("drf", study)
+    frames = example_frames(study, batch, 2, seed=2)
+    with torch.no_grad():
+        carry = initial_carry(model, frames[:, :1])
+    transition_calls = []
+    model.transition.register_forward_hook(lambda *_: transition_calls.append(1))
+    outputs = {}
+    for mode in ("batched", "sequential", "naive"):
+        bank = MaskBank(n_samples, (batch, 1, model.decoder.linear3.out_features), model.default_dropout_p)
+        monkeypatch.setattr(parts, "mc_dropout", bank)
+        transition_calls.clear()
+        outputs[mode] = make_frame_fn(model, mode, frames[:, 1:], carry, n_samples)()
+        assert bank.used == n_samples
+        assert len(transition_calls) == (n_samples if mode == "naive" else 1), mode
+    assert len(outputs["batched"]) == 4  # mean, aleatoric, epistemic, total
+    assert outputs["batched"][2].abs().sum() > 0  # the masks differ: a real spread
+    for mode in ("sequential", "naive"):
+        for got, want in zip(outputs[mode], outputs["batched"]):
+            assert got.shape == (batch, 1, model.out_dim)
+            torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-6)
+    transition_calls.clear()
+    mean, sigma = make_frame_fn(model, "no_sampling", frames[:, 1:], carry, n_samples)()
+    assert mean.shape == sigma.shape == (batch, 1, model.out_dim) and len(transition_calls) == 1
+
+
+def test_monoloco_published_runs_the_whole_net_once_per_sample():
+    n_samples, batch = 5, 2
+    frames = example_frames("pedestrians", batch, 2)
+    for mode, calls, rows in (("published", n_samples, batch), ("batched", 1, n_samples * batch),
+                              ("no_sampling", 1, batch)):
+        model = build_timing_model("monoloco", "pedestrians", mode)
+        seen = []
+        model.input_layer.register_forward_hook(lambda mod, inp, out: seen.append(inp[0].shape[0]))
+        out = make_frame_fn(model, mode, frames[:, 1:], None, n_samples)()
+        assert seen == [rows] * calls, mode
+        assert all(t.shape == (batch, 1, 1) for t in out)
+    with pytest.raises(ValueError, match="mc_mode='sequential'"):
+        make_frame_fn(build_timing_model("monoloco", "pedestrians", "batched"), "published",
+                      frames[:, 1:], None, n_samples)
+
+
+def test_bad_arguments_fail_early_with_the_fix():
+    model = build_timing_model("lstm", "pedestrians")
+    frames = example_frames("pedestrians", 2, 3)
+    with pytest.raises(ValueError, match="not timed for lstm"):
+        make_frame_fn(model, "naive", frames[:, :1], None, 3)
+    with pytest.raises(ValueError, match=r"\(B, 1, \.\.\.\)"):
+        step_features(model, frames, None)
+    with pytest.raises(ValueError, match="not part of the pendulum study"):
+        build_timing_model("monoloco", "pendulum")
+    with pytest.raises(ValueError, match="batch_sizes"):
+        inference_benchmark(3, batch_sizes=[0], threads=[1], min_run_time=0.01)
+    with pytest.raises(ValueError, match="n_samples"):
+        inference_benchmark(0, batch_sizes=[1], threads=[1], min_run_time=0.01)
+    if not torch.cuda.is_available():
+        with pytest.raises(RuntimeError, match="no GPU"):
+            timing.timing_devices("cuda")
+
+
+def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
+    profile = tmp_path / "tiny.yaml"
+    profile.write_text(yaml.safe_dump({
+        "profile": "tiny", "seeds": [0], "device": "cpu", "threads": 0, "n_samples": 2,
+        "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01}))
+    assert timing.main(["--profile", str(profile)]) == 0
+    written = pd.read_csv(tmp_path / "results" / "tiny" / "timing.csv")
+    assert list(written.columns) == COLUMNS
+    assert len(written) == sum(len(MODES[k]) for _, _, kinds in STUDIES.values() for k in kinds)
+    assert set(written["device"]) == {"cpu"} and set(written["batch"]) == {1}
+    assert "median_ms_per_frame" in capsys.readouterr().out
+
+
+def test_training_step_times_still_reports_epochs():
+    from drfkit.models import default_config
+
+    configs = {k: default_config(k, "keypoints", 1) for k in ("no_dynamics", "drf")}
+    inputs = example_frames("pedestrians", 2, 3)
+    speed = timing.training_step_times(configs, inputs, torch.rand(2, 3, 1) + 5.0, n_batches_per_epoch=4,
+                                       min_run_time=0.01, threads=1)
+    assert speed["model"].tolist() == ["no_dynamics", "drf"]
+    np.testing.assert_allclose(speed["epoch_s"], 4 * speed["step_median_s"])
+    assert speed["ratio_to_no_dynamics"].iloc[0] == 1.0 and (speed["step_median_s"] > 0).all()

@@ -1,0 +1,171 @@
+"""The training loop: determinism, resume after an interruption (including SIGKILL),
+non-finite guards and checkpoint loading."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from drfkit.data.pendulum import generate_pendulum
+from drfkit.io import CorruptArtefactError, torch_load_checked
+from drfkit.paths import REPO_ROOT
+from drfkit.studies import model_config
+from drfkit.train import NonFiniteLossError, SequenceData, TrainConfig, load_checkpoint, train_model
+
+CONFIG_KIND = "drf"
+
+
+def tiny_data():
+    arrays = generate_pendulum(12, 10, 0.5, seed=3)
+    images, targets = torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"])
+    return SequenceData(images[:8], targets[:8]), SequenceData(images[8:], targets[8:])
+
+
+def train_cfg(epochs=4, seed=0):
+    return TrainConfig(epochs=epochs, lr=3e-3, batch_size=4, seed=seed)
+
+
+def state_equal(a, b):
+    return all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def test_same_seed_same_result_and_resume_equals_uninterrupted(tmp_path):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    a = train_model(cfg, train, val, train_cfg(), tmp_path / "a", progress=False)
+    b = train_model(cfg, train, val, train_cfg(), tmp_path / "b", progress=False)
+    assert [h["val_loss"] for h in a.history] == [h["val_loss"] for h in b.history]
+
+    c1 = train_model(cfg, train, val, train_cfg(), tmp_path / "c", progress=False, stop_after_epochs=2)
+    assert len(c1.history) == 2
+    c2 = train_model(cfg, train, val, train_cfg(), tmp_path / "c", progress=False)
+    assert c2.resumed_from == 2
+    assert [h["val_loss"] for h in c2.history] == [h["val_loss"] for h in a.history]
+    assert state_equal(torch_load_checked(a.last_path)["model"], torch_load_checked(c2.last_path)["model"])
+    # a finished run is a cache hit
+    assert train_model(cfg, train, val, train_cfg(), tmp_path / "c", progress=False).resumed_from == 4
+
+
+def test_other_seed_differs(tmp_path):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    a = train_model(cfg, train, val, train_cfg(epochs=1, seed=0), tmp_path / "a", progress=False)
+    b = train_model(cfg, train, val, train_cfg(epochs=1, seed=1), tmp_path / "b", progress=False)
+    assert a.history[0]["val_loss"] != b.history[0]["val_loss"]
+
+
+def test_sigkill_mid_training_then_resume_matches(tmp_path):
+    epochs = 25  # long enough that the kill lands before the end
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    reference = train_model(cfg, train, val, train_cfg(epochs=epochs), tmp_path / "ref", progress=False)
+
+    stem = tmp_path / "killed"
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), OMP_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "tests._train_worker", str(stem), str(epochs)],
+                            cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    last = Path(f"{stem}-last.pt")
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        if last.exists() and torch_load_checked(last)["epoch"] >= 2:
+            break
+        if proc.poll() is not None:
+            pytest.fail(f"worker ended early: {proc.stderr.read().decode()[-2000:]}")
+        time.sleep(0.02)
+    time.sleep(0.05)  # land somewhere inside the next epoch
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = torch_load_checked(last)["epoch"]
+    assert 2 <= done < epochs, done  # killed before the end, after two epochs
+    assert not list(tmp_path.glob(".*.tmp"))  # at most the kill's own temp file, never a half checkpoint
+    resumed = train_model(cfg, train, val, train_cfg(epochs=epochs), stem, progress=False)
+    assert resumed.resumed_from == done
+    assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in reference.history]
+    assert state_equal(torch_load_checked(reference.best_path)["state_dict"],
+                       torch_load_checked(resumed.best_path)["state_dict"])
+
+
+def test_non_finite_loss_stops_with_step_named_and_keeps_checkpoint(tmp_path, monkeypatch):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    train_model(cfg, train, val, train_cfg(epochs=1), tmp_path / "r", progress=False)
+    from drfkit import models
+
+    real_build = models.build_model
+    calls = {"n": 0}
+
+    def poisoned(config):
+        model = real_build(config)
+        real_loss = model.loss
+
+        def loss(*args, **kwargs):
+            calls["n"] += 1
+            value = real_loss(*args, **kwargs)
+            return value * float("nan") if calls["n"] == 2 else value
+
+        model.loss = loss
+        return model
+
+    monkeypatch.setattr(models, "build_model", poisoned)
+    with pytest.raises(NonFiniteLossError, match=r"epoch 2, step 1"):
+        train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "r", progress=False)
+    assert torch_load_checked(Path(f"{tmp_path / 'r'}-last.pt"))["epoch"] == 1  # last good one kept
+
+
+def test_load_checkpoint_round_trip_and_corruption(tmp_path):
+    train, val = tiny_data()
+    res = train_model(model_config("pendulum", CONFIG_KIND), train, val, train_cfg(epochs=1), tmp_path / "m",
+                      progress=False)
+    model = load_checkpoint(res.best_path)
+    assert not model.training
+    mean, sigma = model(val.inputs)
+    assert mean.shape == val.targets.shape and (sigma > 0).all()
+    with pytest.raises(CorruptArtefactError, match="resume state"):
+        load_checkpoint(res.last_path)
+    res.best_path.write_bytes(res.best_path.read_bytes()[:100])
+    with pytest.raises(CorruptArtefactError, match="m-best.pt"):
+        load_checkpoint(res.best_path)
+
+
+def test_changed_configuration_does_not_resume_silently(tmp_path):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    train_model(cfg, train, val, train_cfg(epochs=1), tmp_path / "x", progress=False)
+    with pytest.raises(CorruptArtefactError, match="different configuration"):
+        train_model(cfg, train, val, TrainConfig(epochs=1, lr=1e-2, batch_size=4, seed=0), tmp_path / "x",
+                    progress=False)
+
+
+@pytest.mark.parametrize("make, fragment", [
+    (lambda: SequenceData(torch.full((2, 3, 17, 3), float("nan")), torch.zeros(2, 3, 1)), "NaN"),
+    (lambda: SequenceData(torch.zeros(2, 4, 24, 24, dtype=torch.uint8), torch.zeros(2, 3, 2)), "disagree"),
+    (lambda: SequenceData(torch.zeros(0, 3, 17, 3), torch.zeros(0, 3, 1)), "empty"),
+    (lambda: SequenceData(torch.zeros(2, 3, 17, 3), torch.zeros(2, 3, 1), torch.ones(2, 4, dtype=torch.bool)),
+     "mask"),
+])
+def test_bad_data_is_rejected_early(make, fragment):
+    with pytest.raises(ValueError, match=fragment):
+        make()
+
+
+def test_frames_flattens_only_real_frames():
+    mask = torch.tensor([[True, True, False], [True, False, False]])
+    data = SequenceData(torch.arange(6.0).reshape(2, 3, 1, 1).expand(2, 3, 17, 3).clone(),
+                        torch.arange(6.0).reshape(2, 3, 1), mask)
+    frames = data.frames()
+    assert frames.targets.shape == (3, 1, 1)
+    assert frames.targets.flatten().tolist() == [0.0, 1.0, 3.0]
+    assert np.all(frames.inputs[:, 0, 0, 0].numpy() == [0.0, 1.0, 3.0])

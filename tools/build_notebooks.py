@@ -1,0 +1,97 @@
+"""Build notebooks/NN_*.ipynb from their percent-format sources in notebooks/src/.
+
+The sources are plain Python (reviewable diffs); the .ipynb files are what papermill and
+nbval run. ``--execute`` runs each notebook with its defaults (the quick profile) and
+stores the outputs, which strict nbval then compares against.
+
+Cell syntax: ``# %%`` starts a code cell, ``# %% [markdown]`` a markdown cell (lines
+lose their leading ``# ``), ``# %% tags=["..."]`` adds tags. The body of the cell tagged
+``parameters`` is generated from ``params/quick.yaml`` (one place for the defaults).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+import nbformat
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC, OUT = ROOT / "notebooks" / "src", ROOT / "notebooks"
+HEADER = re.compile(r"^# %%(?P<md> \[markdown\])?(?: tags=(?P<tags>\[.*\]))?\s*$")
+
+
+def parameters_cell(notebook: str) -> str:
+    """The notebook's parameters, with the quick profile's values (what nbval runs)."""
+    sys.path.insert(0, str(ROOT))
+    from drfkit.params import NOTEBOOKS, SPECS, load_profile
+
+    quick = load_profile("quick")
+    lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them."]
+    for key in NOTEBOOKS[notebook]:
+        lines.append(f"{key} = {quick[key]!r}  # {SPECS[key].allowed}")
+    return "\n".join(lines)
+
+
+def parse(text: str, notebook: str) -> nbformat.NotebookNode:
+    nb = nbformat.v4.new_notebook()
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.metadata["language_info"] = {"name": "python"}
+    cells: list[tuple[bool, list[str], list[str]]] = []
+    for line in text.splitlines():
+        m = HEADER.match(line)
+        if m:
+            cells.append((bool(m["md"]), json.loads(m["tags"]) if m["tags"] else [], []))
+        elif cells:
+            cells[-1][2].append(line)
+    for is_md, tags, lines in cells:
+        while lines and not lines[-1].strip():
+            lines.pop()
+        if is_md:
+            src = "\n".join(l[2:] if l.startswith("# ") else l.lstrip("#") for l in lines)
+            cell = nbformat.v4.new_markdown_cell(src)
+        elif "parameters" in tags:
+            cell = nbformat.v4.new_code_cell(parameters_cell(notebook))
+        else:
+            cell = nbformat.v4.new_code_cell("\n".join(lines))
+        if tags:
+            cell.metadata["tags"] = tags
+        nb.cells.append(cell)
+    for i, cell in enumerate(nb.cells):  # stable ids keep diffs small
+        cell["id"] = f"cell-{i:02d}"
+    return nb
+
+
+def execute(path: Path, timeout: int = 1800) -> None:
+    from nbclient import NotebookClient
+
+    nb = nbformat.read(path, as_version=4)
+    NotebookClient(nb, timeout=timeout, kernel_name="python3",
+                   resources={"metadata": {"path": str(OUT)}}).execute()
+    for cell in nb.cells:  # execution counts are noise in diffs; nbval ignores them
+        cell.metadata.pop("execution", None)
+    nbformat.write(nb, path)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("names", nargs="*", help="source stems to build (default: all)")
+    ap.add_argument("--execute", action="store_true", help="run and store outputs")
+    args = ap.parse_args()
+    sources = sorted(SRC.glob("*.py"))
+    if args.names:
+        sources = [s for s in sources if any(s.stem.startswith(n) for n in args.names)]
+    for src in sources:
+        target = OUT / f"{src.stem}.ipynb"
+        nbformat.write(parse(src.read_text(), src.stem), target)
+        print(f"built {target.relative_to(ROOT)}", flush=True)
+        if args.execute:
+            execute(target)
+            print(f"executed {target.relative_to(ROOT)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
