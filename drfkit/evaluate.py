@@ -57,13 +57,22 @@ def prediction_metrics(mean, total_sigma, targets, mask=None, level: float = 0.9
 def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: float | None = None,
                    level: float = 0.95, batch_size: int = 256, device=None) -> dict[str, float]:
     """Predict ``data`` with MC dropout and return every metric (PICP as a fraction)."""
-    from drfkit.uncertainty import predict
+    return evaluate_model_rates(model, data, n_samples=n_samples, dropout_rates=[dropout_p], level=level,
+                                batch_size=batch_size, device=device)[0]
 
-    pred = predict(model, data.inputs, n_samples=n_samples, dropout_p=dropout_p, batch_size=batch_size,
-                   device=device)
-    out = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
-    out["aleatoric"] = float(torch.as_tensor(pred.aleatoric).mean())
-    out["epistemic"] = float(torch.as_tensor(pred.epistemic).mean())
+
+def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_rates, level: float = 0.95,
+                         batch_size: int = 256, device=None) -> list[dict[str, float]]:
+    """``evaluate_model`` at several dropout rates; the encoder and filter run once."""
+    from drfkit.uncertainty import predict_rates
+
+    out = []
+    for pred in predict_rates(model, data.inputs, n_samples=n_samples, dropout_rates=dropout_rates,
+                              batch_size=batch_size, device=device):
+        m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
+        m["aleatoric"] = float(pred.aleatoric.mean())
+        m["epistemic"] = float(pred.epistemic.mean())
+        out.append(m)
     return out
 
 
@@ -105,10 +114,10 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
         data = (studies.pendulum_data(P, "test", noise) if study == "pendulum"
                 else studies.pedestrian_data(P, "test", noise))
         for (kind, seed), model in models.items():
-            for p in dropout_rates:
-                torch.manual_seed(seed)  # the dropout masks of MC sampling are part of the seed
-                m = evaluate_model(model, data, n_samples=P.n_samples, dropout_p=p, level=P.interval_level,
-                                   device=device)
+            torch.manual_seed(seed)  # the dropout masks of MC sampling are part of the seed
+            results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
+                                           level=P.interval_level, device=device)
+            for p, m in zip(dropout_rates, results):
                 rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
                              "dropout_p": model.default_dropout_p if p is None else float(p), **m})
     return pd.DataFrame(rows)

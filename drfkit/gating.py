@@ -20,8 +20,11 @@ validation set; ``choose_direction`` / ``choose_threshold`` take only validation
 (their arguments say so); the test set enters only ``evaluate_gate`` / ``sweep_gate``,
 which apply a fitted ``Gate``. The threshold is the validation-score quantile of the
 smallest dropout fraction whose validation PICP is within ``tolerance`` of
-always-dropout's validation PICP. It is an absolute score value: on a noisier test set
-more frames cross it, which is the point of a competency measure.
+always-dropout's validation PICP. It is an absolute score value, so on noisier frames
+more of them cross it. ``gating_study`` fits on the ``val`` split (held-out sequences) at
+the test's noise level by default: the gate is tuned for the condition it runs in; at the
+training noise, intervals without dropout may already cover as well as with it, and the
+rule then turns dropout off (``val_noise`` picks the validation noise).
 
 Gated inference is real, not simulated: features (encoder + filter) run once, the head
 runs with S samples on the gathered selected frames and once, deterministically, on the
@@ -371,6 +374,8 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
     abs_error = (det_mean - y).abs().mean(dim=-1)
     direction, rho = choose_direction(k[real].cpu().numpy(), abs_error[real].cpu().numpy())
     scores = competency_score(gains, direction)[real].cpu().numpy()
+    # Each candidate's gated prediction is assembled from the two full passes: a frame's head
+    # output depends only on its own features and dropout masks, which is what gated_head computes.
     as_np = lambda t: t[real].double().cpu().numpy()  # noqa: E731  (N, out) over real frames
     threshold, table = choose_threshold(scores, as_np(y), (as_np(det_mean), as_np(det_sigma)),
                                         (as_np(mc_mean), as_np(mc_total)), tolerance=tolerance,
@@ -400,13 +405,17 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     on this test set (drawn with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
     adds Kalman-gain rows, each with its random twin 'random:<name>' (used by ``sweep_gate``).
 
-    Times, per real frame, all measured in this call on the same inputs:
-      head_ms  the uncertainty stage alone (scoring, selection, gather, head, scatter);
-      time_ms  the whole inference (features + stage): for the four settings measured in one
-               piece (``run_setting``); for the extra thresholds, the measured features time
-               (with gains for Kalman-gain, without for random) plus their measured head_ms.
+    Times, per real frame, all measured in this call on the same inputs (interleaved medians):
+      features_ms  the features (encoder + filter; with gains for Kalman-gain rows only);
+      head_ms      the uncertainty stage alone (scoring, selection, gather, head, scatter);
+      time_ms      features_ms + head_ms: the inference of the setting. Settings differ only in
+                   the stage, and summing two medians keeps the features' timing noise out of
+                   the differences between settings;
+      whole_ms     the four settings' whole inference timed in one piece (``run_setting``), a
+                   check on time_ms (NaN for the extra thresholds).
     Returns one row per setting: setting, threshold, fraction, n_selected, picp (fraction),
-    mpiw, nll, mae, time_ms, head_ms, batch_ms (time_ms for the whole batch), frames, threads.
+    mpiw, nll, mae, time_ms, head_ms, features_ms, whole_ms, batch_ms (time_ms for the whole
+    batch), frames, threads.
     """
     n_samples = check_n_samples(n_samples)
     p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
@@ -447,26 +456,27 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
 
         stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h, gains, real, s, **common, **e))
                      for name, (setting, extra) in variants.items()}
-        head_s = measure_interleaved(stage_fns, min_run_time / 3, device)
+        head_s = measure_interleaved(stage_fns, min_run_time / 2, device)
         whole_fns = {name: (lambda s=variants[name][0], e=variants[name][1]:
                             run_setting(model, x, real, s, **common, **e)) for name in SETTINGS}
         whole_fns["features"] = lambda: model.features(x)
         whole_fns["features_gains"] = lambda: model.features(x, return_gains=True)
-        whole_s = measure_interleaved(whole_fns, min_run_time, device)
+        whole_s = measure_interleaved(whole_fns, min_run_time, device, min_rounds=7)
     finally:
         model.train(was)
     frame = pd.DataFrame(rows)
     frame["fraction"] = frame["n_selected"] / n_real
-    head = frame["setting"].map(head_s)
-    features = np.where(frame["setting"].str.startswith("random"), whole_s["features"], whole_s["features_gains"])
-    whole = frame["setting"].map(whole_s).fillna(pd.Series(features + head, index=frame.index))
-    frame["head_ms"] = head * 1e3 / n_real
-    frame["time_ms"] = whole * 1e3 / n_real
-    frame["batch_ms"] = whole * 1e3
+    gains_used = frame["setting"].isin(["kalman_gain", *(thresholds or {})])
+    per_frame = 1e3 / n_real
+    frame["head_ms"] = frame["setting"].map(head_s) * per_frame
+    frame["features_ms"] = np.where(gains_used, whole_s["features_gains"], whole_s["features"]) * per_frame
+    frame["time_ms"] = frame["features_ms"] + frame["head_ms"]
+    frame["whole_ms"] = frame["setting"].map(whole_s) * per_frame
+    frame["batch_ms"] = frame["time_ms"] * n_real
     frame["frames"] = n_real
     frame["threads"] = torch.get_num_threads()
     order = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae", "time_ms",
-             "head_ms", "batch_ms", "frames", "threads"]
+             "head_ms", "features_ms", "whole_ms", "batch_ms", "frames", "threads"]
     return frame[order]
 
 
@@ -501,13 +511,30 @@ def evaluation_level(P, study: str) -> float:
     return max(P.pend_eval_max_noise) if study == "pendulum" else max(P.ped_eval_p)
 
 
-def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3
-                 ) -> dict[str, pd.DataFrame]:
+@torch.no_grad()
+def selected_fraction(model, gate: Gate, data, device=None) -> float:
+    """Fraction of the real frames of ``data`` (a SequenceData) that ``gate`` sends to MC dropout."""
+    device = torch.device(device) if device is not None else next(model.parameters()).device
+    was = _eval_mode(model)
+    try:
+        gains = model.kalman_gains(as_model_input(model, data.inputs).to(device))
+    finally:
+        model.train(was)
+    if gains is None:
+        raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs 'drf'")
+    real = _real_mask(data).to(device)
+    return float(gate.select(gains, real).sum()) / int(real.sum())
+
+
+def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3,
+                 val_noise: float | None = None) -> dict[str, pd.DataFrame]:
     """Fit a gate per DRF seed on validation data, then evaluate and sweep it on the test set.
 
-    Validation data is the ``val`` split at the training noise; test is the ``test`` split at
-    ``evaluation_level``. Returns {'table': one row per seed and setting, 'sweep': one row per seed,
-    method and threshold, 'validation': the candidate table per seed}.
+    Test: the ``test`` split at ``evaluation_level``. Validation: the ``val`` split (other
+    sequences, other motions / scenes) at ``val_noise``, by default the test's noise level: the
+    gate is tuned, on held-out sequences, for the condition it will run in. Returns
+    {'table': one row per seed and setting, 'sweep': one row per seed, method and threshold,
+    'validation': the candidate table per seed}.
     """
     from drfkit import studies
 
@@ -519,8 +546,9 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
         raise ValueError(f"no trained 'drf' model for {study}: gating needs the filter's gains")
     device = studies.pick_device(P.device)
     level_ = evaluation_level(P, study)
+    val_level = level_ if val_noise is None else float(val_noise)
     data = studies.pendulum_data if study == "pendulum" else studies.pedestrian_data
-    val, test = data(P, "val"), data(P, "test", level_)
+    val, test = data(P, "val", val_level), data(P, "test", level_)
     tables, sweeps, vals = [], [], []
     for seed, model in sorted(drf.items()):
         model = model.to(device)
@@ -529,14 +557,14 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
                                    device=device)
         table, sweep = sweep_gate(model, gate, test, n_samples=P.n_samples, level=P.interval_level, seed=seed,
                                   device=device, min_run_time=min_run_time)
-        ident = {"study": study, "seed": seed, "noise": level_}
+        ident = {"study": study, "seed": seed, "noise": level_, "val_noise": val_level}
         gate_info = {"direction": gate.direction, "rank_correlation": gate.rank_correlation,
                      "val_fraction": gate.val_fraction, "val_picp": gate.val_picp,
                      "val_picp_always": gate.val_picp_always}
         tables.append(table.assign(**ident, **gate_info))
         sweeps.append(sweep.assign(**ident))
-        vals.append(val_table.assign(study=study, seed=seed))
-    lead = ["study", "seed", "noise"]
+        vals.append(val_table.assign(study=study, seed=seed, val_noise=val_level))
+    lead = ["study", "seed", "noise", "val_noise"]
     cat = lambda fs: pd.concat(fs, ignore_index=True)  # noqa: E731
     table, sweep = cat(tables), cat(sweeps)
     return {"table": table[lead + [c for c in table.columns if c not in lead]],
@@ -555,6 +583,7 @@ def paper_table() -> pd.DataFrame:
 __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
-    "GatedPrediction", "gated_head", "run_setting", "measure_interleaved", "Gate", "fit_gate",
-    "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "gating_study", "paper_table",
+    "GatedPrediction", "gated_head", "uncertainty_stage", "run_setting", "measure_interleaved", "Gate", "fit_gate",
+    "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "selected_fraction", "gating_study",
+    "paper_table",
 ]

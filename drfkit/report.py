@@ -124,3 +124,67 @@ def plot_calibration(points: pd.DataFrame, models: list[str]):
         ax.set_title(f"noise {lv:g}"); ax.set_xlabel("expected quantile"); ax.set_ylabel("observed")
     axes[0, 0].legend(fontsize=7)
     return fig
+
+
+README_START, README_END = "<!-- results:start -->", "<!-- results:end -->"
+HEADLINE_FIGURES = [
+    ("pendulum_mae", "Pendulum MAE at max noise 0.5 and 0.75 (paper values as black ticks)"),
+    ("pendulum_picp_mpiw", "Pendulum PICP against MPIW as the dropout rate varies"),
+    ("pedestrians_mae", "Pedestrian depth MAE with Monoloco at p = 0.01, 0.025, 0.05"),
+    ("pedestrians_picp_mpiw", "Pedestrian PICP against MPIW at the three noise levels"),
+    ("pendulum_sweep", "Pendulum: MAE, PICP and NLL along the noise sweep"),
+    ("pedestrians_sweep", "Pedestrians: MAE, PICP and NLL along the noise sweep"),
+]
+
+
+def results_section(profile: str, command: str, link_figures: bool) -> str:
+    """The README's results section for ``profile``, built from its claims.md and manifest."""
+    import json
+
+    from drfkit.paths import REPO_ROOT, results_dir
+
+    root = results_dir(profile)
+    claims = root / "claims.md"
+    if not claims.exists():
+        return f"No results for profile `{profile}` yet: run `{command}`.\n"
+    manifest = json.loads((root / "manifest.json").read_text()) if (root / "manifest.json").exists() else {}
+    pipe = manifest.get("pipeline", {})
+    env = manifest.get("environment", {})
+    lines = [f"Profile `{profile}`, produced by `{command}` "
+             f"(pipeline status: {pipe.get('status', 'n/a')}, total {pipe.get('total_s', 'n/a')} s on "
+             f"{env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
+             f"{(env.get('git') or {}).get('commit', '?')}).", ""]
+    table = claims.read_text().split("\n", 4)[-1]  # drop the title lines
+    lines += [table.strip(), ""]
+    if link_figures:
+        for name, caption in HEADLINE_FIGURES:
+            png = root / "figures" / f"{name}.png"
+            if png.exists():
+                lines += [f"![{caption}]({png.relative_to(REPO_ROOT)})", f"*{caption}* (`{command}`)", ""]
+    return "\n".join(lines)
+
+
+def update_readme(sections: list[tuple[str, str, bool]]) -> None:
+    """Replace the README text between the results markers by the sections of
+    (profile, command, link_figures)."""
+    from drfkit.io import atomic_write_text
+    from drfkit.paths import REPO_ROOT
+
+    path = REPO_ROOT / "README.md"
+    text = path.read_text()
+    if README_START not in text or README_END not in text:
+        raise ValueError(f"README.md lacks the markers {README_START} ... {README_END}")
+    body = "\n".join(results_section(*s) for s in sections)
+    head, rest = text.split(README_START, 1)
+    tail = rest.split(README_END, 1)[1]
+    atomic_write_text(path, f"{head}{README_START}\n{body}\n{README_END}{tail}")
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Regenerate the README's results section from results/.")
+    ap.add_argument("--profiles", nargs="+", default=["paper"])
+    args = ap.parse_args()
+    update_readme([(p, "make reproduce" if p == "paper" else f"make reproduce PROFILE={p}", p == "paper")
+                   for p in args.profiles])

@@ -47,6 +47,7 @@ import numpy as np
 import pandas as pd
 import torch
 import torch.utils.benchmark as benchmark
+from torch.utils.benchmark.utils.timer import timer as synchronised_clock
 
 # study -> (input kind, out_dim, models); the pedestrian study is the one the paper times.
 STUDIES: dict[str, tuple[str, int, tuple[str, ...]]] = {
@@ -67,28 +68,46 @@ COLUMNS = ["study", "model", "mode", "n_samples", "batch", "threads", "device", 
 GROUP = ["batch", "threads", "device"]  # ratios are taken only inside one such group of one run
 
 
+def _single_calls(fn, threads: int, n_calls: int) -> list[float]:
+    """Seconds of ``n_calls`` calls of fn at ``threads``, each timed alone with the
+    benchmark's clock (which synchronises CUDA before reading the time)."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        times = []
+        for _ in range(n_calls):
+            start = synchronised_clock()
+            fn()
+            times.append(synchronised_clock() - start)
+        return times
+    finally:
+        torch.set_num_threads(previous)
+
+
 def _warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str = "",
-                sub_label: str = "") -> benchmark.Timer:
-    """A ``benchmark.Timer`` of ``fn()`` at ``threads``, after warm-up calls.
+                sub_label: str = "") -> tuple[benchmark.Timer, float]:
+    """A ``benchmark.Timer`` of ``fn()`` at ``threads`` after warm-up, and the seconds of
+    the last warm-up call.
 
     Warm-up (allocations, lazy init, CUDA context and kernels) runs at the measured thread
     count; calls after the first only while they are cheap next to min_run_time, so a slow
-    configuration does not spend most of the benchmark warming up. The block-size estimate
-    of ``blocked_autorange`` runs the statement again before measuring.
+    configuration does not spend most of the benchmark warming up.
     """
     timer = benchmark.Timer(stmt="fn()", globals={"fn": fn}, label=label, sub_label=sub_label,
                             num_threads=threads)
-    for _ in range(warmup):
-        if timer.timeit(1).median > 0.1 * min_run_time:
+    seconds = _single_calls(fn, threads, 1)[0]
+    for _ in range(warmup - 1):
+        if seconds > 0.1 * min_run_time:
             break
-    return timer
+        seconds = _single_calls(fn, threads, 1)[0]
+    return timer, seconds
 
 
 def _measure(fn, min_run_time: float, label: str, sub_label: str, threads: int,
              warmup: int = 1) -> benchmark.Measurement:
     # blocked_autorange synchronises CUDA around each block of calls
-    return _warm_timer(fn, threads, min_run_time, warmup, label, sub_label).blocked_autorange(
-        min_run_time=min_run_time)
+    timer, _ = _warm_timer(fn, threads, min_run_time, warmup, label, sub_label)
+    return timer.blocked_autorange(min_run_time=min_run_time)
 
 
 def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor, targets: torch.Tensor,
@@ -317,19 +336,24 @@ def inference_benchmark(n_samples: int = 25, batch_sizes=(1, 16, 256), threads=(
                 for n_threads in threads:
                     if progress:
                         progress(f"{dev} {study} batch {batch} threads {n_threads}")
-                    timers = {}
+                    timers, fns, call_s = {}, {}, {}
                     for (kind, mode), model in models.items():
                         with torch.inference_mode():
                             carry = initial_carry(model, first)
-                        fn = make_frame_fn(model, mode, frame, carry, n_samples)
-                        timers[kind, mode] = _warm_timer(fn, n_threads, min_run_time, warmup=3)
+                        fns[kind, mode] = make_frame_fn(model, mode, frame, carry, n_samples)
+                        timers[kind, mode], call_s[kind, mode] = _warm_timer(fns[kind, mode], n_threads,
+                                                                             min_run_time, warmup=3)
                     # Interleaved rounds: every configuration of the group is measured in each
                     # round, so a change in machine load during the group hits all of them
-                    # alike instead of biasing the ratios between them.
+                    # alike instead of biasing the ratios between them. A call longer than a
+                    # round's budget is timed alone: blocked_autorange would spend one more
+                    # call estimating a block size of 1.
+                    budget = min_run_time / rounds
                     times: dict[tuple[str, str], list[float]] = {key: [] for key in timers}
                     for _ in range(rounds):
                         for key, tm in timers.items():
-                            times[key] += tm.blocked_autorange(min_run_time=min_run_time / rounds).times
+                            times[key] += (_single_calls(fns[key], n_threads, 1) if call_s[key] > budget
+                                           else tm.blocked_autorange(min_run_time=budget).times)
                     load = load_average()
                     for (kind, mode), per_call in times.items():
                         q25, median, q75 = (float(v) for v in np.percentile(per_call, [25, 50, 75]))

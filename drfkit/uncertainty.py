@@ -94,8 +94,18 @@ def predict(model, inputs, n_samples: int = 25, dropout_p: float | None = None,
         train/eval mode are restored afterwards.
     return_gains: also return the Kalman gains (B, T, n, n) (None for non-filter models).
     """
+    return predict_rates(model, inputs, n_samples, [dropout_p], batch_size, device, return_gains)[0]
+
+
+@torch.no_grad()
+def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), batch_size: int | None = None,
+                  device=None, return_gains: bool = False) -> list[Prediction]:
+    """``predict`` at several dropout rates, sharing one run of ``model.features`` (the
+    encoder and filter) per chunk: one Prediction per entry of ``dropout_rates``."""
     n_samples = check_n_samples(n_samples)
-    p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+    rates = [model.default_dropout_p if p is None else check_dropout_p(p) for p in dropout_rates]
+    if not rates:
+        raise ValueError("dropout_rates is empty")
     if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, int)
                                    or batch_size < 1):
         raise ValueError(f"batch_size must be a positive int or None, got {batch_size!r}")
@@ -104,30 +114,32 @@ def predict(model, inputs, n_samples: int = 25, dropout_p: float | None = None,
     if n_seq == 0:
         raise ValueError("inputs hold no sequence (B = 0)")
     chunk = n_seq if batch_size is None else batch_size
-
     home, was_training = _model_device(model), model.training
     target = home if device is None else torch.device(device)
     model.to(target).eval()
     try:
-        parts: list[tuple[torch.Tensor, ...]] = []
+        parts: list[list[tuple[torch.Tensor, ...]]] = [[] for _ in rates]
         gains: list[torch.Tensor] = []
         for start in range(0, n_seq, chunk):
             h, g = model.features(x[start:start + chunk].to(target), return_gains=return_gains)
-            if n_samples == 0:
-                mean, sigma = model.head(h)
-                summary = (mean, sigma, torch.zeros_like(mean), sigma)
-            else:
-                summary = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p))
-            parts.append(tuple(t.float().cpu() for t in summary))
+            for i, p in enumerate(rates):
+                if n_samples == 0:
+                    mean, sigma = model.head(h)
+                    summary = (mean, sigma, torch.zeros_like(mean), sigma)
+                else:
+                    summary = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p))
+                parts[i].append(tuple(t.float().cpu() for t in summary))
             if g is not None:
                 gains.append(g.float().cpu())
     finally:
         model.to(home).train(was_training)
-
-    mean, aleatoric, epistemic, total = (torch.cat(ts, dim=0) for ts in zip(*parts))
-    return Prediction(mean=mean, aleatoric=aleatoric, epistemic=epistemic, total=total,
-                      n_samples=n_samples, dropout_p=p if n_samples else 0.0,
-                      gains=torch.cat(gains, dim=0) if gains else None)
+    all_gains = torch.cat(gains, dim=0) if gains else None
+    out = []
+    for p, chunks in zip(rates, parts):
+        mean, aleatoric, epistemic, total = (torch.cat(ts, dim=0) for ts in zip(*chunks))
+        out.append(Prediction(mean=mean, aleatoric=aleatoric, epistemic=epistemic, total=total,
+                              n_samples=n_samples, dropout_p=p if n_samples else 0.0, gains=all_gains))
+    return out
 
 
 def intervals(pred: Prediction, level: float = 0.95) -> tuple[torch.Tensor, torch.Tensor]:

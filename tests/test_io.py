@@ -69,3 +69,8 @@ def test_corrupt_checkpoint_gives_one_clear_error(tmp_path):
 def test_atomic_npz_roundtrip(tmp_path):
     atomic_save_npz(tmp_path / "a.npz", x=np.ones((2, 3), np.float32))
     assert load_npz_checked(tmp_path / "a.npz")["x"].shape == (2, 3)
+
+
+def test_written_files_are_readable_by_others(tmp_path):
+    path = atomic_write_text(tmp_path / "r.txt", "x")
+    assert path.stat().st_mode & 0o044  # not the 0600 of a bare mkstemp

@@ -198,3 +198,30 @@ def test_predict_rejects_bad_inputs():
         predict(kp, [[0.0]])
     with pytest.raises(ValueError, match="B = 0"):
         predict(kp, np.zeros((0, 3, 17, 3), dtype=np.float32))
+
+
+def test_predict_rates_shares_the_filter_and_matches_single_rate_predictions():
+    from drfkit.uncertainty import predict_rates
+
+    model = make("drf", "pendulum")
+    calls = {"filter": 0}
+    run_filter = model.run_filter
+
+    def counted(*args, **kwargs):
+        calls["filter"] += 1
+        return run_filter(*args, **kwargs)
+
+    model.run_filter = counted
+    x = numpy_inputs("pendulum", b=3, t=5)
+    torch.manual_seed(7)
+    many = predict_rates(model, x, n_samples=10, dropout_rates=[0.0, 0.3, None])
+    assert calls["filter"] == 1 and [p.dropout_p for p in many] == [0.0, 0.3, model.default_dropout_p]
+    assert torch.equal(many[0].epistemic, torch.zeros_like(many[0].epistemic))
+    torch.manual_seed(7)
+    first = predict(model, x, n_samples=10, dropout_p=0.0)
+    torch.testing.assert_close(first.mean, many[0].mean)
+    # the second rate draws the masks that follow the first rate's (none at p = 0)
+    torch.manual_seed(7)
+    second = predict(model, x, n_samples=10, dropout_p=0.3)
+    torch.testing.assert_close(second.mean, many[1].mean)
+    torch.testing.assert_close(second.epistemic, many[1].epistemic)

@@ -82,7 +82,7 @@ plt.show()
 curves = {s: evaluate_study(P, s, lv, P.dropout_rates, models=models[s])
           for s, lv in (("pendulum", P.pend_eval_max_noise), ("pedestrians", P.ped_eval_p))}
 curve_summary = {s: summarise(c, ["model", "noise", "dropout_p"]) for s, c in curves.items()}
-save_table(P.profile, "ood_picp_mpiw", pd.concat([c.assign(study=s) for s, c in curve_summary.items()]))
+_ = save_table(P.profile, "ood_picp_mpiw", pd.concat([c.assign(study=s) for s, c in curve_summary.items()]))
 
 # %%
 fig = plot_picp_mpiw(curve_summary["pendulum"], P.pend_models, PENDULUM_PICP_MPIW, level_name="max noise",
@@ -128,7 +128,7 @@ ood_pend = [m for m in P.pend_eval_max_noise if m > P.pend_train_max_noise]
 rows = [
     claims.c1_pendulum_mae_ordering(pend, P.pend_eval_max_noise),
     claims.c2_pendulum_picp_mpiw(curve_summary["pendulum"], P.pend_eval_max_noise),
-    claims.c3_pedestrian_ood_gain(ped, ood_ped),
+    claims.c3_pedestrian_ood_gain(evals[evals["study"] == "pedestrians"], ood_ped),
     claims.c4_in_distribution_parity(ped, P.ped_train_p),
     claims.c5_intervals_under_shift(
         summary, [("pendulum", m) for m in ood_pend] + [("pedestrians", p) for p in ood_ped],

@@ -1,0 +1,291 @@
+"""Tests for drfkit.gating: the competency score, random gating, threshold choice on
+validation data only, and gated inference (MC dropout on selected frames, deterministic
+elsewhere) against the no-dropout and always-dropout results."""
+from __future__ import annotations
+
+import inspect
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+import drfkit.models.parts as parts
+from drfkit import gating
+from drfkit.models import build_model, default_config
+from drfkit.train import SequenceData
+
+torch.set_num_threads(1)
+
+B, T, LATENT = 6, 5, 4
+
+
+def tiny_drf(seed: int = 0, kind: str = "drf"):
+    torch.manual_seed(seed)
+    extra = {"transition_hidden": 8} if kind == "drf" else {}
+    cfg = default_config(kind, "keypoints", 1, latent=LATENT, feature_dim=8, decoder_hidden=16,
+                         dropout_p=0.3, **extra)
+    return build_model(cfg).eval()
+
+
+def keypoint_data(seed: int = 0, offset: float = 0.0, padded: bool = True) -> SequenceData:
+    g = torch.Generator().manual_seed(seed)
+    x = torch.randn(B, T, 17, 3, generator=g)
+    x[..., 2] = torch.rand(B, T, 17, generator=g)
+    y = 10.0 + offset + torch.randn(B, T, 1, generator=g)
+    mask = torch.ones(B, T, dtype=torch.bool)
+    if padded:  # trailing padding on some sequences
+        mask[0, 3:] = False
+        mask[2, 4:] = False
+    return SequenceData(x, y, mask)
+
+
+def stage(model, data, setting, **kw):
+    h, gains = model.features(data.inputs, return_gains=True)
+    return gating.uncertainty_stage(model, h, gains, data.mask, setting, n_samples=8, dropout_p=0.3, **kw)
+
+
+# --------------------------------------------------------------------------- scores
+def test_mean_gain_and_competency_score_shapes_and_values():
+    gains = torch.rand(3, 7, 5, 5)
+    k = gating.mean_gain(gains)
+    assert k.shape == (3, 7)
+    torch.testing.assert_close(k[1, 2], gains[1, 2].diagonal().mean())
+    torch.testing.assert_close(gating.competency_score(gains, 1), k)
+    torch.testing.assert_close(gating.competency_score(gains, -1), 1.0 - k)
+    with pytest.raises(ValueError, match="direction"):
+        gating.competency_score(gains, 0)
+    with pytest.raises(ValueError, match=r"\(B, T, n, n\)"):
+        gating.mean_gain(torch.rand(3, 7, 5))
+
+
+def test_score_from_a_real_filter_is_per_frame_and_first_gain_is_identity():
+    model = tiny_drf()
+    gains = model.kalman_gains(keypoint_data().inputs)
+    assert gains.shape == (B, T, LATENT, LATENT)
+    score = gating.competency_score(gains, 1)
+    assert score.shape == (B, T)
+    assert torch.allclose(score[:, 0], torch.ones(B))  # K_0 = I: mean gain 1
+    assert torch.allclose(gating.competency_score(gains, -1)[:, 0], torch.zeros(B))
+
+
+def test_rank_correlation_and_direction_known_answers():
+    x = np.arange(20.0)
+    assert gating.rank_correlation(x, x ** 3) == pytest.approx(1.0)
+    assert gating.rank_correlation(x, -np.exp(x)) == pytest.approx(-1.0)
+    assert math.isnan(gating.rank_correlation(x, np.ones(20)))
+    assert gating.choose_direction(x, x ** 2) == (1, pytest.approx(1.0))
+    assert gating.choose_direction(x, -x)[0] == -1
+    assert gating.choose_direction(x, np.ones(20))[0] == gating.DEFAULT_DIRECTION
+
+
+# --------------------------------------------------------------------------- random gating
+@pytest.mark.parametrize("fraction", [0.0, 0.1, 0.37, 0.5, 1.0])
+def test_random_gating_selects_exactly_round_f_n_real_frames(fraction):
+    mask = keypoint_data().mask
+    n_real = int(mask.sum())
+    sel = gating.random_gating(mask, fraction, seed=3)
+    assert sel.shape == mask.shape and sel.dtype == torch.bool
+    assert int(sel.sum()) == round(fraction * n_real)
+    assert not (sel & ~mask).any()  # never a padded frame
+
+
+def test_random_gating_is_seeded_and_seeds_differ():
+    mask = torch.ones(20, 30, dtype=torch.bool)
+    a, b = gating.random_gating(mask, 0.3, seed=1), gating.random_gating(mask, 0.3, seed=1)
+    c = gating.random_gating(mask, 0.3, seed=2)
+    assert torch.equal(a, b)
+    assert not torch.equal(a, c)
+    assert int(a.sum()) == int(c.sum()) == 180
+    with pytest.raises(ValueError, match="n_selected"):
+        gating.random_selection(mask, 601, seed=0)
+
+
+# --------------------------------------------------------------------------- thresholds
+def test_threshold_for_fraction_selects_that_fraction_of_validation_scores():
+    scores = np.random.default_rng(0).permutation(100).astype(float)
+    for f in (0.1, 0.3, 0.55):
+        thr = gating.threshold_for_fraction(scores, f)
+        assert int((scores > thr).sum()) == round(100 * f)
+    assert gating.threshold_for_fraction(scores, 0.0) == gating.NEVER
+    assert gating.threshold_for_fraction(scores, 1.0) == gating.ALWAYS
+    assert not (torch.tensor(scores) > gating.NEVER).any() and (torch.tensor(scores) > gating.ALWAYS).all()
+
+
+def test_choose_threshold_known_answer():
+    """Targets far from the deterministic mean exactly on the 30 highest-score frames; MC
+    intervals cover everything. PICP(f) = 0.7 + min(f, 0.3), so tolerance 0 picks f = 0.3,
+    tolerance 0.15 picks the first grid fraction >= 0.15 (0.2)."""
+    n = 100
+    scores = np.arange(n, dtype=float)
+    y = np.where(scores >= 70, 1.0, 0.0)[:, None]
+    det = (np.zeros((n, 1)), np.full((n, 1), 0.01))
+    mc = (np.zeros((n, 1)), np.full((n, 1), 10.0))
+    thr, table = gating.choose_threshold(scores, y, det, mc, tolerance=0.0, n_points=11)
+    assert int((scores > thr).sum()) == 30
+    chosen = table[table["chosen"]].iloc[0]
+    assert chosen["target_fraction"] == pytest.approx(0.3) and chosen["val_picp"] == pytest.approx(1.0)
+    np.testing.assert_allclose(table["val_picp"], 0.7 + np.minimum(table["target_fraction"], 0.3))
+    thr2, _ = gating.choose_threshold(scores, y, det, mc, tolerance=0.15, n_points=11)
+    assert int((scores > thr2).sum()) == 20
+    with pytest.raises(ValueError, match="N = 50 scores"):
+        gating.choose_threshold(scores[:50], y, det, mc, tolerance=0.0, n_points=11)
+
+
+def test_threshold_api_takes_validation_arrays_only():
+    for fn in (gating.choose_threshold, gating.choose_direction, gating.fit_gate):
+        params = inspect.signature(fn).parameters
+        assert not any("test" in name for name in params), (fn.__name__, list(params))
+
+
+def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
+    """Test targets carry a sentinel (+1000); every array the direction and threshold are
+    chosen from is recorded and must hold validation values only."""
+    val, test = keypoint_data(seed=1), keypoint_data(seed=2, offset=1000.0)
+    recorded = []
+    real_direction, real_threshold = gating.choose_direction, gating.choose_threshold
+
+    def record_direction(*args):
+        recorded.append(("direction", args))
+        return real_direction(*args)
+
+    def record_threshold(*args, **kwargs):
+        recorded.append(("threshold", args))
+        return real_threshold(*args, **kwargs)
+
+    monkeypatch.setattr(gating, "choose_direction", record_direction)
+    monkeypatch.setattr(gating, "choose_threshold", record_threshold)
+    from drfkit import studies
+
+    served = []
+
+    def fake_data(P, split, noise_p=None):
+        served.append((split, noise_p))
+        return val if split == "val" else test
+
+    monkeypatch.setattr(studies, "pedestrian_data", fake_data)
+    P = SimpleNamespace(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
+                        gating_sweep_points=3, interval_level=0.95)
+    out = gating.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
+                              min_run_time=0.001)
+    assert served == [("val", 0.05), ("test", 0.05)]
+    assert [kind for kind, _ in recorded] == ["direction", "threshold"]
+    for _, args in recorded:
+        for a in args:
+            for arr in (a if isinstance(a, tuple) else (a,)):
+                assert np.abs(np.asarray(arr)).max() < 500, "a test array reached the gate's choice"
+    val_targets = val.targets[val.mask].numpy()
+    np.testing.assert_allclose(recorded[1][1][1], val_targets)
+    # the test set was used afterwards (sentinel targets: nothing is covered)
+    assert (out["table"]["picp"] == 0).all() and set(out["table"]["seed"]) == {0}
+
+
+# --------------------------------------------------------------------------- gated inference
+def layout_free_dropout(h, n_samples, p):
+    """A dropout mask that depends only on a value and the sample index, not on where the
+    frame sits in the batch, so gathered and full-batch passes draw the same masks."""
+    s = torch.arange(1, n_samples + 1, dtype=h.dtype).view(-1, *([1] * h.ndim))
+    keep = torch.sin(h.unsqueeze(0) * 37.0 * s + s) > -0.6
+    return h.unsqueeze(0) * keep / (1.0 - p)
+
+
+def test_gated_head_equals_always_on_selected_frames_and_deterministic_elsewhere(monkeypatch):
+    monkeypatch.setattr(parts, "mc_dropout", layout_free_dropout)
+    model, data = tiny_drf(), keypoint_data()
+    always, det = stage(model, data, "always"), stage(model, data, "no_dropout")
+    selected = gating.random_gating(data.mask, 0.4, seed=0)
+    h, _ = model.features(data.inputs)
+    gated = gating.gated_head(model, h, selected, n_samples=8, dropout_p=0.3)
+    assert torch.equal(gated.selected, selected)
+    assert (always.epistemic[selected] > 0).all()  # the comparison is not between zeros
+    for field in ("mean", "aleatoric", "epistemic", "total"):
+        g, a, d = (getattr(p, field) for p in (gated, always, det))
+        torch.testing.assert_close(g[selected], a[selected], rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(g[~selected], d[~selected], rtol=1e-5, atol=1e-6)
+    assert (gated.epistemic[~selected] == 0).all()
+
+
+def test_never_threshold_is_no_dropout_and_always_threshold_is_always_with_real_dropout():
+    model, data = tiny_drf(), keypoint_data(padded=False)
+    torch.manual_seed(5)
+    always = stage(model, data, "always")
+    det = stage(model, data, "no_dropout")
+    never = stage(model, data, "kalman_gain", direction=1, threshold=gating.NEVER)
+    torch.manual_seed(5)  # same seed: the gathered (1, B*T) pass draws the same masks
+    every = stage(model, data, "kalman_gain", direction=-1, threshold=gating.ALWAYS)
+    assert not never.selected.any() and every.selected.all()
+    for field in ("mean", "aleatoric", "epistemic", "total"):
+        torch.testing.assert_close(getattr(never, field), getattr(det, field), rtol=0, atol=0)
+        torch.testing.assert_close(getattr(every, field), getattr(always, field), rtol=1e-5, atol=1e-6)
+    assert (always.epistemic > 0).all()
+
+
+def test_run_setting_equals_features_then_stage_and_checks_its_arguments():
+    model, data = tiny_drf(), keypoint_data()
+    torch.manual_seed(0)
+    whole = gating.run_setting(model, data.inputs, data.mask, "random", n_samples=8, dropout_p=0.3,
+                               n_random=7, random_seed=1)
+    torch.manual_seed(0)
+    parts_ = stage(model, data, "random", n_random=7, random_seed=1)
+    torch.testing.assert_close(whole.total, parts_.total)
+    assert int(whole.selected.sum()) == 7
+    with pytest.raises(ValueError, match="fit_gate"):
+        stage(model, data, "kalman_gain")
+    with pytest.raises(ValueError, match="n_random"):
+        stage(model, data, "random")
+    with pytest.raises(ValueError, match="drf"):
+        gating.run_setting(tiny_drf(kind="no_dynamics"), data.inputs, data.mask, "kalman_gain",
+                           n_samples=8, dropout_p=0.3, direction=1, threshold=0.5)
+
+
+# --------------------------------------------------------------------------- evaluation
+def test_evaluate_gate_and_sweep_rows_are_consistent():
+    # no padding in test: then 'always' and the gathered all-frames pass draw the same masks
+    model, val, test = tiny_drf(), keypoint_data(seed=1), keypoint_data(seed=2, padded=False)
+    gate, val_table = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
+    assert gate.direction in (1, -1) and len(gate.sweep_thresholds) == 4
+    assert val_table["chosen"].sum() == 1
+    table, sweep = gating.sweep_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001)
+    assert list(table["setting"]) == ["no_dropout", "always", "kalman_gain", "random"]
+    by = table.set_index("setting")
+    assert by.loc["no_dropout", "fraction"] == 0 and by.loc["always", "fraction"] == 1
+    assert by.loc["random", "n_selected"] == by.loc["kalman_gain", "n_selected"]
+    assert table["picp"].between(0, 1).all() and (table["head_ms"] > 0).all() and (table["whole_ms"] > 0).all()
+    np.testing.assert_allclose(table["time_ms"], table["features_ms"] + table["head_ms"])
+    assert sweep["whole_ms"].isna().all() and (sweep["time_ms"] > 0).all()
+    assert (table["frames"] == int(test.mask.sum())).all()
+    assert len(sweep) == 8 and set(sweep["method"]) == {"kalman_gain", "random"}
+    for method in ("kalman_gain", "random"):
+        rows = sweep[sweep["method"] == method].sort_values("val_fraction")
+        assert rows["fraction"].iloc[0] == 0 and rows["fraction"].iloc[-1] == 1
+        # never = no dropout, always = always (same seed for the masks)
+        for end, setting in ((0, "no_dropout"), (-1, "always")):
+            for metric in ("picp", "mpiw", "nll"):
+                assert rows[metric].iloc[end] == pytest.approx(by.loc[setting, metric], rel=1e-5)
+    kg = sweep[sweep["method"] == "kalman_gain"].set_index("val_fraction")["fraction"]
+    rnd = sweep[sweep["method"] == "random"].set_index("val_fraction")["fraction"]
+    assert (kg == rnd).all()
+
+
+def test_selected_fraction_of_never_and_always_gates():
+    model, data = tiny_drf(), keypoint_data()
+    gate, _ = gating.fit_gate(model, data, n_samples=4, tolerance=0.0, n_points=3)
+    for threshold, expected in ((gating.NEVER, 0.0), (gating.ALWAYS, 1.0)):
+        g = gating.Gate(**{**gate.__dict__, "threshold": threshold})
+        assert gating.selected_fraction(model, g, data) == expected
+
+
+def test_paper_table_has_picp_as_fraction():
+    paper = gating.paper_table()
+    assert len(paper) == 8 and set(paper["setting"]) == set(gating.SETTINGS)
+    row = paper[(paper["study"] == "pendulum") & (paper["setting"] == "kalman_gain")].iloc[0]
+    assert row["picp"] == pytest.approx(0.921) and row["time_ms"] == pytest.approx(16.8)
+
+
+def test_measure_interleaved_reports_the_slower_function_as_slower():
+    import time as _time
+
+    out = gating.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
+                                     min_run_time=0.01, device=torch.device("cpu"), min_rounds=3)
+    assert out["slow"] > 0.0015 and out["fast"] < out["slow"]
