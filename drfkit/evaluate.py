@@ -111,8 +111,7 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     device = studies.pick_device(P.device)
     rows = []
     for noise in noise_levels:
-        data = (studies.pendulum_data(P, "test", noise) if study == "pendulum"
-                else studies.pedestrian_data(P, "test", noise))
+        data = studies.study_data(P, study, "test", noise)
         for (kind, seed), model in models.items():
             torch.manual_seed(seed)  # the dropout masks of MC sampling are part of the seed
             results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
@@ -135,8 +134,7 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
     device = studies.pick_device(P.device)
     rows = []
     for noise in noise_levels:
-        data = (studies.pendulum_data(P, "test", noise) if study == "pendulum"
-                else studies.pedestrian_data(P, "test", noise))
+        data = studies.study_data(P, study, "test", noise)
         mask = None
         if data.mask is not None:
             mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)

@@ -8,6 +8,7 @@ duration and the total.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -39,20 +40,28 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3") ->
     for name in names:
         print(f"== {name} ({profile_name})", flush=True)
         t = time.perf_counter()
+        final, partial = out_dir / f"{name}.ipynb", out_dir / f".{name}.partial.ipynb"
         try:
+            # papermill rewrites its output after every cell: run into a partial file and move it
+            # into place when done, so a killed run never leaves a half-executed notebook behind
             pm.execute_notebook(
-                str(notebook_path(name)), str(out_dir / f"{name}.ipynb"),
+                str(notebook_path(name)), str(partial),
                 parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
                 cwd=str(NOTEBOOKS_DIR), log_output=False,
             )
         except Exception as exc:  # papermill raises PapermillExecutionError with the cell's traceback
+            failed = out_dir / f"{name}.failed.ipynb"
+            if partial.exists():
+                os.replace(partial, failed)  # complete up to the failing cell, which shows the error
             durations[name] = round(time.perf_counter() - t, 1)
             update_manifest(profile_name, pipeline={
                 "started": started, "finished": now_iso(), "total_s": round(time.perf_counter() - t0, 1),
                 "status": f"failed in {name}", "durations_s": durations, "notebooks": names})
             print(f"\nFAILED: notebook {name} ({type(exc).__name__}); the executed copy with the error is "
-                  f"{out_dir / (name + '.ipynb')}\n{exc}", file=sys.stderr)
+                  f"{failed}\n{exc}", file=sys.stderr)
             return 1
+        os.replace(partial, final)
+        (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
         durations[name] = round(time.perf_counter() - t, 1)
     total = round(time.perf_counter() - t0, 1)
     update_manifest(profile_name, pipeline={"started": started, "finished": now_iso(), "total_s": total,

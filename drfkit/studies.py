@@ -86,6 +86,11 @@ STUDIES = {
 }
 
 
+def study_data(P, study: str, split: str, noise: float | None = None) -> SequenceData:
+    """A split of either study at a noise level (default: the training noise)."""
+    return STUDIES[study]["data"](P, split, noise)
+
+
 def study_models(P, study: str) -> list[str]:
     return list(P.pend_models if study == "pendulum" else P.ped_models)
 

@@ -62,6 +62,9 @@ def as_model_input(model, inputs) -> torch.Tensor:
         inputs = torch.from_numpy(np.ascontiguousarray(inputs))
     if not isinstance(inputs, torch.Tensor):
         raise TypeError(f"inputs must be a numpy array or torch tensor, got {type(inputs).__name__}")
+    if inputs.is_floating_point() and not bool(torch.isfinite(inputs).all()):
+        raise ValueError("inputs contain NaN or inf: pass uint8 images, or keypoints with missed ones "
+                         "zeroed (x = y = 0, confidence 0) as PifPaf does")
     if model.input_kind == "pendulum":
         if inputs.ndim != 4 or inputs.shape[-2:] != (24, 24):
             raise ValueError(f"pendulum inputs must be (B, T, 24, 24) images, got {tuple(inputs.shape)}")

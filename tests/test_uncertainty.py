@@ -225,3 +225,12 @@ def test_predict_rates_shares_the_filter_and_matches_single_rate_predictions():
     second = predict(model, x, n_samples=10, dropout_p=0.3)
     torch.testing.assert_close(second.mean, many[1].mean)
     torch.testing.assert_close(second.epistemic, many[1].epistemic)
+
+
+@pytest.mark.parametrize("kind,input_kind", [("drf", "pendulum"), ("drf", "keypoints")])
+def test_predict_rejects_nan_inputs(kind, input_kind):
+    model = make(kind, input_kind)
+    x = numpy_inputs(input_kind).astype(np.float32) / (255.0 if input_kind == "pendulum" else 1.0)
+    x[0, 0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        predict(model, x, n_samples=2)

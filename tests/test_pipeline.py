@@ -1,0 +1,32 @@
+"""The papermill pipeline stops at the first failing notebook, names it, and keeps the
+executed copy with the error; the manifest records the failure."""
+import json
+import subprocess
+import sys
+
+import pytest
+import torch
+import yaml
+
+from drfkit.paths import PARAMS_DIR, REPO_ROOT
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="the failure used here is asking for a GPU that is absent")
+def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
+    # valid parameters, but device 'cuda' on a CPU-only machine fails in the notebook's first cell
+    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"profile": "failing", "device": "cuda"}
+    path = tmp_path / "failing.yaml"
+    path.write_text(yaml.safe_dump(values))
+    env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path),
+                           "--only", "00_data_prep", "04_timing"],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert "FAILED: notebook 00_data_prep" in proc.stderr and "no GPU" in proc.stderr
+    assert "== 04_timing" not in proc.stdout  # stopped at the first failure
+    executed = tmp_path / "results" / "failing" / "executed"
+    assert (executed / "00_data_prep.failed.ipynb").exists()
+    assert not (executed / "00_data_prep.ipynb").exists() and not list(executed.glob(".*partial*"))
+    manifest = json.loads((tmp_path / "results" / "failing" / "manifest.json").read_text())
+    assert manifest["pipeline"]["status"] == "failed in 00_data_prep"
+
