@@ -31,7 +31,7 @@ def parameters_cell(notebook: str) -> str:
     quick = load_profile("quick")
     lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them."]
     for key in NOTEBOOKS[notebook]:
-        lines.append(f"{key} = {quick[key]!r}  # {SPECS[key].allowed}")
+        lines += [f"# {key}: {SPECS[key].allowed}", f"{key} = {quick[key]!r}"]
     return "\n".join(lines)
 
 
