@@ -156,6 +156,16 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
              f"{(env.get('git') or {}).get('commit', '?')}).", ""]
     table = claims.read_text().split("\n", 4)[-1]  # drop the title lines
     lines += [table.strip(), ""]
+    budget = root / "training_budget.csv"
+    if budget.exists():
+        b = pd.read_csv(budget)
+        lines += [f"Training cost of this profile on this machine, measured by `python -m drfkit.budget --profile "
+                  f"{profile}` (one training step per model, scaled by batches, epochs and seeds): "
+                  f"**{b['hours'].sum():.1f} hours** in all.", "",
+                  "| study | model | s / epoch | epochs × seeds | hours |", "|---|---|---|---|---|"]
+        lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | {r.epochs} × {r.seeds} | {r.hours:.2f} |"
+                  for r in b.itertuples()]
+        lines.append("")
     if link_figures:
         for name, caption in HEADLINE_FIGURES:
             png = root / "figures" / f"{name}.png"

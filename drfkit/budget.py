@@ -1,0 +1,66 @@
+"""How long a profile's training takes on this machine, before running it.
+
+``python -m drfkit.budget --profile paper`` measures one training step (forward, loss,
+backward) of every model at the profile's batch size and sequence length, on the profile's
+real training split, with ``torch.utils.benchmark``; multiplies by batches per epoch,
+epochs and seeds; and writes ``results/<profile>/training_budget.csv``. It is an estimate
+(no optimiser step, no validation pass, no data loading), measured, not guessed.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit import studies
+from drfkit.io import atomic_write_csv
+from drfkit.params import Params, load_profile, notebook_params
+from drfkit.paths import results_dir
+from drfkit.timing import training_step_times
+
+
+def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
+    """One row per (study, model): step time, batches per epoch, epochs, seeds, hours."""
+    rows = []
+    for study in ("pendulum", "pedestrians"):
+        train = studies.study_data(P, study, "train")
+        for kind in studies.study_models(P, study):
+            cfg = studies.train_config(P, study, kind, P.seeds[0])
+            data = train.frames() if cfg.framewise else train
+            batch = min(cfg.batch_size, len(data))
+            step = training_step_times({kind: studies.model_config(study, kind, P)}, data.inputs[:batch],
+                                       data.targets[:batch], n_batches_per_epoch=1, min_run_time=min_run_time)
+            step_s = float(step["step_median_s"].iloc[0])
+            batches = int(np.ceil(len(data) / cfg.batch_size))
+            hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600
+            rows.append({"study": study, "model": kind, "batch": batch, "frames_per_item": int(data.inputs.shape[1]),
+                         "step_s": step_s, "batches_per_epoch": batches, "epoch_s": step_s * batches,
+                         "epochs": cfg.epochs, "seeds": len(P.seeds), "hours": hours,
+                         "threads": torch.get_num_threads()})
+    return pd.DataFrame(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m drfkit.budget", description=__doc__.splitlines()[0])
+    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
+    ap.add_argument("--min-run-time", type=float, default=1.0, help="seconds of timing per model")
+    args = ap.parse_args(argv)
+    values = load_profile(args.profile)
+    keys = set(notebook_params("01_pendulum_training", values)) | set(notebook_params("02_nuscenes_training", values))
+    P = Params(**{k: values[k] for k in keys})
+    if P.threads:
+        torch.set_num_threads(P.threads)
+    table = training_budget(P, args.min_run_time)
+    print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    print(f"total: {table['hours'].sum():.1f} hours of training on this machine "
+          f"({torch.get_num_threads()} torch threads)")
+    path = atomic_write_csv(results_dir(P.profile) / "training_budget.csv", table)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

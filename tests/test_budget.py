@@ -1,0 +1,25 @@
+"""The training-time estimate: measured step times scaled by batches, epochs and seeds."""
+import pandas as pd
+import pytest
+import yaml
+
+from drfkit import budget
+from drfkit.paths import PARAMS_DIR
+
+
+def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values.update(profile="tiny", pend_train_sequences=6, pend_val_sequences=2, pend_test_sequences=2,
+                  pend_seq_len=8, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=3, seeds=[0, 1, 2])
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(values))
+    assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
+    table = pd.read_csv(tmp_path / "tiny" / "training_budget.csv")
+    assert set(zip(table["study"], table["model"])) == (
+        {("pendulum", m) for m in values["pend_models"]} | {("pedestrians", m) for m in values["ped_models"]})
+    pend = table[table["study"] == "pendulum"].iloc[0]
+    assert pend["batches_per_epoch"] == 1 and pend["epochs"] == 3 and pend["seeds"] == 3
+    assert pend["hours"] == pytest.approx(pend["step_s"] * 1 * 3 * 3 / 3600)
+    mono = table[table["model"] == "monoloco"].iloc[0]
+    assert mono["frames_per_item"] == 1 and mono["epochs"] == values["monoloco_epochs"]  # single frames
