@@ -157,6 +157,8 @@ def train_model(
     stem = Path(checkpoint_stem)
     last_path, best_path = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
     fp = fingerprint(model_config, cfg, data_key)
+    for stale in stem.parent.glob(f".{stem.name}-*.tmp"):  # left by a run killed mid-write
+        stale.unlink(missing_ok=True)
     if cfg.framewise:
         train, val = train.frames(), val.frames()
 
