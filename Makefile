@@ -44,6 +44,7 @@ notebooks: $(STAMP)
 	$(PY) tools/build_notebooks.py --execute
 
 clean:
-	rm -rf results/quick results/nbval results/test .pytest_cache
+	find results -mindepth 1 -maxdepth 1 ! -name paper -exec rm -rf {} +
+	rm -rf .pytest_cache
 	find . -name __pycache__ -type d -not -path './$(VENV)/*' -prune -exec rm -rf {} +
 	rm -rf results/paper/data
