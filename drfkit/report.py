@@ -198,3 +198,20 @@ if __name__ == "__main__":
     args = ap.parse_args()
     update_readme([(p, "make reproduce" if p == "paper" else f"make reproduce PROFILE={p}", p == "paper")
                    for p in args.profiles])
+
+
+def paper_comparison(summary: pd.DataFrame, paper: dict, metric: str = "mae") -> pd.DataFrame:
+    """Ours next to the paper's value for every (model, noise) the paper reports.
+
+    summary: ``drfkit.evaluate.summarise`` by model, noise; paper: noise -> model -> value.
+    Columns: model, noise, ours, ours_ci (95 % half-width over seeds), paper, ours_over_paper.
+    """
+    rows = []
+    for r in summary.itertuples():
+        ref = _paper_value(paper, r.noise, r.model)
+        if np.isnan(ref):
+            continue
+        ours = getattr(r, metric)
+        rows.append({"model": r.model, "noise": r.noise, "ours": ours, "ours_ci": getattr(r, f"{metric}_ci"),
+                     "paper": ref, "ours_over_paper": ours / ref})
+    return pd.DataFrame(rows)

@@ -152,3 +152,16 @@ def test_summarise_t_interval():
     assert s.loc["a", "mae"] == 2.0 and s.loc["a", "n_seeds"] == 3
     assert s.loc["a", "mae_ci"] == pytest.approx(t975(2) * 1.0 / math.sqrt(3))
     assert math.isnan(s.loc["b", "mae_ci"])
+
+
+def test_paper_comparison_pairs_ours_with_the_paper():
+    from drfkit.paper import PENDULUM_MAE
+    from drfkit.report import paper_comparison
+
+    summary = pend((0.01, 0.05), (0.03, 0.06), (0.05, 0.1)).assign(mae_ci=0.001)
+    table = paper_comparison(summary, PENDULUM_MAE).set_index(["model", "noise"])
+    assert len(table) == 6
+    row = table.loc[("drf", 0.75)]
+    assert row["paper"] == PENDULUM_MAE[0.75]["drf"] and row["ours_over_paper"] == pytest.approx(0.05 / 0.0426968253)
+    # levels the paper does not report are left out
+    assert paper_comparison(summary.assign(noise=0.3), PENDULUM_MAE).empty
