@@ -20,6 +20,6 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
         {("pendulum", m) for m in values["pend_models"]} | {("pedestrians", m) for m in values["ped_models"]})
     pend = table[table["study"] == "pendulum"].iloc[0]
     assert pend["batches_per_epoch"] == 1 and pend["epochs"] == 3 and pend["seeds"] == 3
-    assert pend["hours"] == pytest.approx(pend["step_s"] * 1 * 3 * 3 / 3600)
+    assert pend["hours"] == pytest.approx(pend["step_s"] * 1 * 3 * 3 / 3600, rel=1e-4)  # CSV keeps 6 digits
     mono = table[table["model"] == "monoloco"].iloc[0]
     assert mono["frames_per_item"] == 1 and mono["epochs"] == values["monoloco_epochs"]  # single frames
