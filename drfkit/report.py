@@ -153,7 +153,10 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     lines = [f"Profile `{profile}`, produced by `{command}` "
              f"(pipeline status: {pipe.get('status', 'n/a')}, total {pipe.get('total_s', 'n/a')} s on "
              f"{env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
-             f"{(env.get('git') or {}).get('commit', '?')}).", ""]
+             f"{(env.get('git') or {}).get('commit', '?')}).",
+             "Notebooks run for this profile so far: " + ", ".join(
+                 f"{name} ({entry.get('status', '?')})" for name, entry in sorted(manifest.get("notebooks", {}).items()))
+             + ".", ""]
     table = claims.read_text().split("\n", 4)[-1]  # drop the title lines
     lines += [table.strip(), ""]
     budget = root / "training_budget.csv"
