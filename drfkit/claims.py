@@ -23,6 +23,12 @@ from drfkit.paths import results_dir
 REPRODUCED, PARTLY, NOT = "reproduced", "partly", "not reproduced"
 NOT_TESTABLE = "not testable"  # the data cannot decide (e.g. a gate that selects no frame or every frame)
 COLUMNS = ["id", "claim", "paper", "ours", "rule", "verdict"]
+# Every claim row and what fills it: claims.md lists the ones a profile has not evaluated yet.
+CLAIM_SOURCES = {
+    "C1": "notebook 03, pendulum", "C2": "notebook 03, pendulum", "C3": "notebook 03, pedestrians",
+    "C4": "notebook 03, pedestrians", "C5": "notebook 03, both studies", "C6": "notebook 04",
+    "C7a": "notebook 05, pendulum", "C7b": "notebook 05, pedestrians",
+}
 
 
 def _cell(summary: pd.DataFrame, model: str, metric: str, **where: Any) -> float:
@@ -236,4 +242,7 @@ def to_markdown(table: pd.DataFrame, profile: str) -> str:
     for _, r in table.iterrows():
         cells = [str(r[c]).replace("|", "/") for c in ("id", "claim", "paper", "ours", "verdict", "rule")]
         lines.append("| " + " | ".join(cells) + " |")
+    missing = [f"{cid} ({src})" for cid, src in CLAIM_SOURCES.items() if cid not in set(table["id"])]
+    if missing:
+        lines += ["", "Not evaluated yet in this profile: " + "; ".join(missing) + "."]
     return "\n".join(lines) + "\n"

@@ -41,6 +41,7 @@ def _in01(v: float) -> bool:
 
 PEND_MODELS = ("drf", "no_dynamics", "lstm")
 PED_MODELS = ("drf", "no_dynamics", "lstm", "monoloco")
+STUDY_NAMES = ("pendulum", "pedestrians")
 
 SPECS: dict[str, Spec] = {
     # -- common -----------------------------------------------------------------------
@@ -93,6 +94,11 @@ SPECS: dict[str, Spec] = {
     "monoloco_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "monoloco_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "monoloco_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
+    # -- evaluation ------------------------------------------------------------------------
+    "eval_studies": Spec("list[str]", f"a non-empty subset of {list(STUDY_NAMES)}, without repeats",
+                         lambda v: len(v) > 0 and set(v) <= set(STUDY_NAMES) and len(set(v)) == len(v),
+                         "which studies notebooks 03 and 05 evaluate (both, unless one's models are not "
+                         "trained yet: its claims are then listed as not evaluated)"),
     # -- uncertainty ---------------------------------------------------------------------
     "n_samples": Spec("int", "an integer >= 1 (Monte Carlo dropout passes)", lambda v: v >= 1),
     "dropout_rates": Spec("list[float]", "a non-empty list of numbers in [0, 1)",
@@ -121,14 +127,15 @@ _PED_TRAIN = ["ped_models", "ped_epochs", "ped_batch_size", "ped_lr", "monoloco_
 _UNC = ["n_samples", "dropout_rates", "interval_level"]
 _TIMING = ["timing_batch_sizes", "timing_threads", "timing_min_run_time"]
 _GATING = ["gating_picp_tolerance", "gating_sweep_points"]
+_EVAL = ["eval_studies"]
 
 NOTEBOOKS: dict[str, list[str]] = {
     "00_data_prep": _COMMON + _PEND_DATA + _PED_DATA,
     "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC,
     "02_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
-    "03_ood_noise_evaluation": _COMMON + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
+    "03_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
     "04_timing": _COMMON + ["n_samples"] + _TIMING,
-    "05_competency_gating": _COMMON + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
+    "05_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }
 
 

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from drfkit.manifest import now_iso, update_manifest
-from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params
+from drfkit.params import NOTEBOOKS, SPECS, ParameterError, load_profile, notebook_params
 from drfkit.paths import NOTEBOOKS_DIR, results_dir
 
 
@@ -22,10 +22,30 @@ def notebook_path(name: str) -> Path:
     return NOTEBOOKS_DIR / f"{name}.ipynb"
 
 
-def run(profile: str, only: list[str] | None = None, kernel: str = "python3") -> int:
+def parse_overrides(items: list[str] | None) -> dict:
+    """``["key=yaml value", ...]`` -> {key: value}, keys checked against the schema."""
+    import yaml
+
+    out = {}
+    for item in items or []:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise ParameterError(f"--set expects KEY=VALUE (VALUE in YAML, e.g. eval_studies=[pedestrians]), "
+                                 f"got {item!r}")
+        if key not in SPECS:
+            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(SPECS)}")
+        try:
+            out[key] = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ParameterError(f"--set {key}: {text!r} is not a YAML value ({exc})") from None
+    return out
+
+
+def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
+        overrides: dict | None = None) -> int:
     import papermill as pm
 
-    values = load_profile(profile)
+    values = load_profile(profile) | (overrides or {})
     profile_name = values.get("profile", Path(profile).stem)
     names = [n for n in NOTEBOOKS if not only or n in only]
     if only and set(only) - set(NOTEBOOKS):
@@ -33,7 +53,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3") ->
     per_notebook = {name: notebook_params(name, values) for name in names}  # all errors before any run
     out_dir = results_dir(profile_name, "executed")
     started, t0 = now_iso(), time.perf_counter()
-    update_manifest(profile_name, profile_file=str(profile), profile_values=values,
+    update_manifest(profile_name, profile_file=str(profile), profile_values=values, overrides=overrides or {},
                     pipeline={"started": started, "finished": None, "total_s": None, "status": "running",
                               "notebooks": names})
     durations = {}
@@ -74,9 +94,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
     parser.add_argument("--only", nargs="*", help="run only these notebooks (names without .ipynb)")
+    parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
+                        help="override profile parameters (YAML values); recorded in the manifest")
     args = parser.parse_args(argv)
     try:
-        return run(args.profile, args.only)
+        return run(args.profile, args.only, overrides=parse_overrides(args.set))
     except ParameterError as exc:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2

@@ -132,18 +132,21 @@ def checkpoint_stem(P, study: str, kind: str, seed: int):
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 
 
-def train_models(P, study: str, progress: bool = True) -> dict[tuple[str, int], TrainResult]:
+def train_models(P, study: str, progress: bool = True, kinds: list[str] | None = None,
+                 seeds: list[int] | None = None) -> dict[tuple[str, int], TrainResult]:
     """Train (or load from cache / resume) every model of ``study`` for every seed.
 
-    Writes ``tables/<study>_training_curves.csv`` with one row per model, seed and epoch.
+    Writes ``tables/<study>_training_curves.csv`` with one row per model, seed and epoch
+    (only when the whole set is trained; ``kinds`` / ``seeds`` pick a subset, as the
+    command line below does to spread training over processes or sessions).
     """
     spec = STUDIES[study]
     device = pick_device(P.device)
     train, val = spec["data"](P, "train"), spec["data"](P, "val")
     data_key = param_hash(spec["key"](P))
     results, curves = {}, []
-    for kind in study_models(P, study):
-        for seed in P.seeds:
+    for kind in kinds or study_models(P, study):
+        for seed in seeds or P.seeds:
             res = train_model(model_config(study, kind, P), train, val, train_config(P, study, kind, seed),
                               checkpoint_stem(P, study, kind, seed), data_key=data_key, device=device,
                               progress=progress)
@@ -152,7 +155,8 @@ def train_models(P, study: str, progress: bool = True) -> dict[tuple[str, int], 
             curve.insert(0, "seed", seed)
             curve.insert(0, "model", kind)
             curves.append(curve)
-    atomic_write_csv(tables_dir(P.profile) / f"{study}_training_curves.csv", pd.concat(curves, ignore_index=True))
+    if kinds is None and seeds is None:
+        atomic_write_csv(tables_dir(P.profile) / f"{study}_training_curves.csv", pd.concat(curves, ignore_index=True))
     return results
 
 
@@ -162,3 +166,55 @@ def trained_models(P, study: str, progress: bool = False) -> dict[tuple[str, int
 
     device = pick_device(P.device)
     return {key: load_checkpoint(res.best_path, device) for key, res in train_models(P, study, progress).items()}
+
+
+# ------------------------------------------------------------------------ command line
+TRAINING_NOTEBOOK = {"pendulum": "01_pendulum_training", "pedestrians": "02_nuscenes_training"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit.studies --profile paper --study pendulum --models drf --seeds 0``
+
+    Trains (or resumes) the checkpoints a profile's training notebook would train, and
+    nothing else: the notebook later finds them and only evaluates. Run several of these
+    with ``--threads 1`` on a multi-core machine, or one per session, to spread a long
+    profile; a killed run resumes from its last finished epoch.
+    """
+    import argparse
+    import sys
+
+    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.runtime import seed_everything
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
+    parser.add_argument("--study", required=True, choices=sorted(STUDIES))
+    parser.add_argument("--models", nargs="*", help="model kinds (default: the profile's)")
+    parser.add_argument("--seeds", nargs="*", type=int, help="model seeds (default: the profile's)")
+    parser.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
+    args = parser.parse_args(argv)
+    notebook = TRAINING_NOTEBOOK[args.study]
+    try:
+        P = validate(notebook, notebook_params(notebook, load_profile(args.profile)))
+        unknown = sorted(set(args.models or []) - set(study_models(P, args.study)))
+        if unknown:
+            raise ParameterError(f"--models {unknown} are not models of the {args.study} study in this "
+                                 f"profile; choose from {study_models(P, args.study)}")
+        if set(args.seeds or []) - set(P.seeds):
+            raise ParameterError(f"--seeds {sorted(set(args.seeds) - set(P.seeds))} are not among the "
+                                 f"profile's seeds {P.seeds}; the notebooks would never use them")
+    except ParameterError as exc:
+        print(f"parameter error: {exc}", file=sys.stderr)
+        return 2
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    seed_everything(P.seeds[0])
+    results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None)
+    for (kind, seed), res in results.items():
+        print(f"{args.study} {kind} seed {seed}: {res.best_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

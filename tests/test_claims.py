@@ -143,7 +143,18 @@ def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
     table = pd.read_csv(tmp_path / "t" / "claims.csv")
     assert list(table["id"]) == ["C4", "C6"]
     assert table.set_index("id").loc["C6", "verdict"] == claims.NOT
-    assert "| C6 |" in (tmp_path / "t" / "claims.md").read_text()
+    text = (tmp_path / "t" / "claims.md").read_text()
+    assert "| C6 |" in text
+    # the claims no notebook has filled yet are named, with where they come from
+    assert "Not evaluated yet in this profile: C1 (notebook 03, pendulum); C2" in text
+    assert "C4 (" not in text and "C6 (" not in text and "C7b (notebook 05, pedestrians)." in text
+
+
+def test_claims_md_names_no_missing_claim_once_all_are_filled(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    rows = [dict(zip(claims.COLUMNS, [cid, "c", "p", "o", "r", claims.PARTLY])) for cid in claims.CLAIM_SOURCES]
+    claims.upsert("t", rows)
+    assert "Not evaluated yet" not in (tmp_path / "t" / "claims.md").read_text()
 
 
 def test_summarise_t_interval():

@@ -404,3 +404,20 @@ def test_keypoint_encoder_sees_position_and_shape_separately():
     with torch.no_grad():
         enc.net[0].weight[:, 34:36] = 0.0  # cut the centre inputs
     torch.testing.assert_close(enc(kp), enc(shifted))
+
+
+def test_image_encoder_chunks_compute_the_same_function():
+    from drfkit.models.parts import ENCODER_CHUNK_FRAMES, ImageEncoder
+
+    torch.manual_seed(0)
+    enc = ImageEncoder()
+    # more frames than one chunk, and not a multiple of it, so the last chunk is short
+    images = torch.randint(0, 256, (3, ENCODER_CHUNK_FRAMES // 2 + 7, 24, 24), dtype=torch.uint8)
+    chunked = enc(images)
+    whole = enc.encode_frames(images.flatten(0, 1).float() / 255.0).view(3, -1, enc.out_dim)
+    assert chunked.shape == (3, ENCODER_CHUNK_FRAMES // 2 + 7, enc.out_dim)
+    torch.testing.assert_close(chunked, whole, rtol=1e-5, atol=1e-6)
+    grads = torch.autograd.grad(chunked.square().sum(), list(enc.parameters()))
+    grads_whole = torch.autograd.grad(whole.square().sum(), list(enc.parameters()))
+    for g, gw in zip(grads, grads_whole):
+        torch.testing.assert_close(g, gw, rtol=1e-4, atol=1e-5)

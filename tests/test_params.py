@@ -78,6 +78,15 @@ def test_wrong_type_or_range_names_the_key(key, value, fragment):
     assert key in str(err.value) and fragment in str(err.value) and "allowed" in str(err.value)
 
 
+@pytest.mark.parametrize("value", [[], ["pendulum", "pendulum"], ["nuscenes"], "pendulum"])
+def test_eval_studies_must_be_a_subset_of_the_studies(value):
+    values = quick_subset("03_ood_noise_evaluation") | {"eval_studies": value}
+    with pytest.raises(ParameterError, match="eval_studies"):
+        validate("03_ood_noise_evaluation", values)
+    ok = validate("05_competency_gating", quick_subset("05_competency_gating") | {"eval_studies": ["pedestrians"]})
+    assert ok.eval_studies == ["pedestrians"]
+
+
 def test_missing_parameter_is_reported():
     values = quick_subset("04_timing")
     del values["n_samples"]

@@ -30,3 +30,25 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     manifest = json.loads((tmp_path / "results" / "failing" / "manifest.json").read_text())
     assert manifest["pipeline"]["status"] == "failed in 00_data_prep"
 
+
+
+def test_overrides_are_parsed_as_yaml_and_checked():
+    from drfkit.params import ParameterError
+    from drfkit.pipeline import parse_overrides
+
+    assert parse_overrides(["eval_studies=[pedestrians]", "threads=1"]) == {"eval_studies": ["pedestrians"],
+                                                                            "threads": 1}
+    assert parse_overrides(None) == {}
+    for bad, fragment in (("eval_studies", "KEY=VALUE"), ("no_such_key=1", "unknown parameter"),
+                          ("seeds=[1, 2", "not a YAML value")):
+        with pytest.raises(ParameterError, match=fragment):
+            parse_overrides([bad])
+
+
+def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
+    env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", "quick", "--only",
+                           "03_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]
+    assert not (tmp_path / "results" / "quick" / "executed").exists()

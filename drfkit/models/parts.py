@@ -22,6 +22,11 @@ VARIANCE_FLOOR = 1e-4
 SIGMA_FLOOR = 1e-3
 
 PENDULUM_SIZE = 24
+# Frames per encoder call. A training batch of 50 sequences x 75 frames makes 100 MB
+# activations per conv layer; cut into chunks of this size they stay in cache, and the
+# encoder's forward + backward runs ~1.5x faster on one CPU core (measured, 3750 frames:
+# 1.17 s whole, 0.77 s in chunks of 256). The function computed is the same.
+ENCODER_CHUNK_FRAMES = 256
 IMAGE_DOWNSAMPLES = ("pool", "stride")
 N_KEYPOINTS = 17
 
@@ -46,7 +51,7 @@ class ImageEncoder(nn.Module):
     before the ReLU is the same function -- ReLU is monotone -- on 4x fewer values.)
     ``downsample='stride'`` replaces the first pooling by a stride-2 5x5 conv: the
     encoder's forward+backward is ~2.5x cheaper on CPU, at the cost of departing from
-    the RKN layout. All B*T frames go through in one call.
+    the RKN layout. The B*T frames go through in chunks of ``ENCODER_CHUNK_FRAMES``.
     """
 
     def __init__(self, feature_dim: int = 64, channels: int = 12, downsample: str = "pool"):
@@ -74,11 +79,15 @@ class ImageEncoder(nn.Module):
         else:
             raise TypeError(f"pendulum images must be uint8 (or float in [0, 1]), got {images.dtype}")
         x, (b, t) = fold_time(x, 2)
-        x = self.conv1(x.unsqueeze(1))
+        x = torch.cat([self.encode_frames(chunk) for chunk in x.split(ENCODER_CHUNK_FRAMES)])
+        return x.view(b, t, -1)
+
+    def encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
+        """(N, 24, 24) float frames -> (N, feature_dim)."""
+        x = self.conv1(frames.unsqueeze(1))
         x = F.relu(F.max_pool2d(x, 2) if self.first_stride == 1 else x)
         x = F.relu(F.max_pool2d(self.conv2(x), 2))
-        x = F.relu(self.fc(x.flatten(1)))
-        return x.view(b, t, -1)
+        return F.relu(self.fc(x.flatten(1)))
 
 
 class KeypointEncoder(nn.Module):
