@@ -4,7 +4,9 @@
 backward) of every model at the profile's batch size and sequence length, on the profile's
 real training split, with ``torch.utils.benchmark``; multiplies by batches per epoch,
 epochs and seeds; and writes ``results/<profile>/training_budget.csv``. It is an estimate
-(no optimiser step, no validation pass, no data loading), measured, not guessed.
+(no optimiser step, no validation pass, no data loading), measured, not guessed. The
+``epochs_done`` and ``hours_left`` columns count the epochs already in the profile's
+``models/*-last.pt`` checkpoints, so the table also says how much of a resumable run is left.
 """
 from __future__ import annotations
 
@@ -16,10 +18,21 @@ import pandas as pd
 import torch
 
 from drfkit import studies
-from drfkit.io import atomic_write_csv
+from drfkit.io import atomic_write_csv, torch_load_checked
 from drfkit.params import Params, load_profile, notebook_params
 from drfkit.paths import results_dir
 from drfkit.timing import training_step_times
+
+
+def epochs_done(P, study: str, kind: str) -> int:
+    """Epochs already trained for ``kind`` over the profile's seeds (from ``-last.pt``)."""
+    done = 0
+    for seed in P.seeds:
+        stem = studies.checkpoint_stem(P, study, kind, seed)
+        last = stem.with_name(f"{stem.name}-last.pt")
+        if last.exists():
+            done += int(torch_load_checked(last)["epoch"])
+    return done
 
 
 def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
@@ -36,9 +49,11 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
             step_s = float(step["step_median_s"].iloc[0])
             batches = int(np.ceil(len(data) / cfg.batch_size))
             hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600
+            done = min(epochs_done(P, study, kind), cfg.epochs * len(P.seeds))
             rows.append({"study": study, "model": kind, "batch": batch, "frames_per_item": int(data.inputs.shape[1]),
                          "step_s": step_s, "batches_per_epoch": batches, "epoch_s": step_s * batches,
-                         "epochs": cfg.epochs, "seeds": len(P.seeds), "hours": hours,
+                         "epochs": cfg.epochs, "seeds": len(P.seeds), "hours": hours, "epochs_done": done,
+                         "hours_left": hours * (1 - done / (cfg.epochs * len(P.seeds))),
                          "threads": torch.get_num_threads()})
     return pd.DataFrame(rows)
 
@@ -47,16 +62,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m drfkit.budget", description=__doc__.splitlines()[0])
     ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
     ap.add_argument("--min-run-time", type=float, default=1.0, help="seconds of timing per model")
+    ap.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
     args = ap.parse_args(argv)
     values = load_profile(args.profile)
     keys = set(notebook_params("01_pendulum_training", values)) | set(notebook_params("02_nuscenes_training", values))
     P = Params(**{k: values[k] for k in keys})
-    if P.threads:
-        torch.set_num_threads(P.threads)
+    if args.threads or P.threads:
+        torch.set_num_threads(args.threads or P.threads)
     table = training_budget(P, args.min_run_time)
     print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
-    print(f"total: {table['hours'].sum():.1f} hours of training on this machine "
-          f"({torch.get_num_threads()} torch threads)")
+    print(f"total: {table['hours'].sum():.1f} hours of training on this machine, {table['hours_left'].sum():.1f} "
+          f"left after the epochs in results/{P.profile}/models ({torch.get_num_threads()} torch threads)")
     path = atomic_write_csv(results_dir(P.profile) / "training_budget.csv", table)
     print(f"wrote {path}")
     return 0

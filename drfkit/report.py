@@ -162,12 +162,16 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     budget = root / "training_budget.csv"
     if budget.exists():
         b = pd.read_csv(budget)
+        if "hours_left" not in b:  # written before the column existed
+            b["epochs_done"], b["hours_left"] = 0, b["hours"]
         lines += [f"Training cost of this profile on this machine, measured by `python -m drfkit.budget --profile "
-                  f"{profile}` (one training step per model, scaled by batches, epochs and seeds): "
-                  f"**{b['hours'].sum():.1f} hours** in all.", "",
-                  "| study | model | s / epoch | epochs × seeds | hours |", "|---|---|---|---|---|"]
-        lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | {r.epochs} × {r.seeds} | {r.hours:.2f} |"
-                  for r in b.itertuples()]
+                  f"{profile}` (one training step per model, scaled by batches, epochs and seeds, "
+                  f"{int(b['threads'].iloc[0])} torch thread(s)): **{b['hours'].sum():.1f} hours** in all, "
+                  f"**{b['hours_left'].sum():.1f} hours left** after the epochs already in `results/{profile}/models/`.",
+                  "", "| study | model | s / epoch | epochs × seeds | epochs done | hours | hours left |",
+                  "|---|---|---|---|---|---|---|"]
+        lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | {r.epochs} × {r.seeds} | {r.epochs_done} | "
+                  f"{r.hours:.2f} | {r.hours_left:.2f} |" for r in b.itertuples()]
         lines.append("")
     if link_figures:
         for name, caption in HEADLINE_FIGURES:

@@ -23,3 +23,26 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
     assert pend["hours"] == pytest.approx(pend["step_s"] * 1 * 3 * 3 / 3600, rel=1e-4)  # CSV keeps 6 digits
     mono = table[table["model"] == "monoloco"].iloc[0]
     assert mono["frames_per_item"] == 1 and mono["epochs"] == values["monoloco_epochs"]  # single frames
+    assert (table["epochs_done"] == 0).all() and (table["hours_left"] == table["hours"]).all()
+
+
+def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
+    from drfkit import studies
+    from drfkit.params import load_profile, notebook_params, validate
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values.update(profile="tiny", pend_train_sequences=4, pend_val_sequences=2, pend_test_sequences=2,
+                  pend_seq_len=6, pend_batch_size=2, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=2,
+                  seeds=[0, 1])
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(values))
+    # one of the two no_dynamics seeds fully trained: 2 of 4 epochs done, half the hours left
+    assert studies.main(["--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
+                         "--seeds", "1"]) == 0
+    assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
+    row = pd.read_csv(tmp_path / "tiny" / "training_budget.csv").set_index(["study", "model"])
+    assert row.loc[("pendulum", "no_dynamics"), "epochs_done"] == 2
+    assert row.loc[("pendulum", "no_dynamics"), "hours_left"] == pytest.approx(
+        row.loc[("pendulum", "no_dynamics"), "hours"] / 2, rel=1e-4)
+    assert row.loc[("pendulum", "drf"), "epochs_done"] == 0
