@@ -150,9 +150,12 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     manifest = json.loads((root / "manifest.json").read_text()) if (root / "manifest.json").exists() else {}
     pipe = manifest.get("pipeline", {})
     env = manifest.get("environment", {})
+    overrides = manifest.get("overrides") or {}
+    last_run = (f"last pipeline run: {', '.join(pipe.get('notebooks', [])) or 'n/a'}"
+                + (f" with --set {' '.join(f'{k}={v}' for k, v in overrides.items())}" if overrides else "")
+                + f", status {pipe.get('status', 'n/a')}, {pipe.get('total_s', 'n/a')} s")
     lines = [f"Profile `{profile}`, produced by `{command}` "
-             f"(pipeline status: {pipe.get('status', 'n/a')}, total {pipe.get('total_s', 'n/a')} s on "
-             f"{env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
+             f"({last_run}, on {env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
              f"{(env.get('git') or {}).get('commit', '?')}).",
              "Notebooks run for this profile so far: " + ", ".join(
                  f"{name} ({entry.get('status', '?')})" for name, entry in sorted(manifest.get("notebooks", {}).items()))
