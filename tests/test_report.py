@@ -1,0 +1,23 @@
+"""The README's results section is built from results/<profile>/ only."""
+import json
+
+import pandas as pd
+
+from drfkit import claims
+from drfkit.report import results_section
+
+
+def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    assert "No results for profile `p` yet" in results_section("p", "make reproduce", False)
+    claims.upsert("p", [claims.c6_speedup(3.0)])
+    (tmp_path / "p" / "manifest.json").write_text(json.dumps({
+        "pipeline": {"status": "ok", "total_s": 12.0, "notebooks": ["03_ood_noise_evaluation"]},
+        "overrides": {"eval_studies": ["pedestrians"]},
+        "notebooks": {"03_ood_noise_evaluation": {"status": "ok"}}}))
+    pd.DataFrame([{"study": "pendulum", "model": "drf", "epoch_s": 10.0, "epochs": 200, "seeds": 3, "hours": 6.0,
+                   "epochs_done": 300, "hours_left": 3.0, "threads": 1}]).to_csv(tmp_path / "p" / "training_budget.csv")
+    text = results_section("p", "make reproduce", False)
+    assert "last pipeline run: 03_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
+    assert "| C6 |" in text and "Not evaluated yet in this profile: C1" in text
+    assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 | 200 × 3 | 300 |" in text
