@@ -22,17 +22,22 @@ from drfkit.io import atomic_write_csv, torch_load_checked
 from drfkit.params import Params, load_profile, notebook_params
 from drfkit.paths import results_dir
 from drfkit.timing import training_step_times
+from drfkit.train import run_finished
 
 
-def epochs_done(P, study: str, kind: str) -> int:
-    """Epochs already trained for ``kind`` over the profile's seeds (from ``-last.pt``)."""
-    done = 0
+def epochs_done(P, study: str, kind: str) -> tuple[int, int]:
+    """(epochs trained, epochs still to train) for ``kind`` over the profile's seeds, read
+    from the ``-last.pt`` checkpoints; a run stopped by its patience has none left."""
+    done = left = 0
     for seed in P.seeds:
+        cfg = studies.train_config(P, study, kind, seed)
         stem = studies.checkpoint_stem(P, study, kind, seed)
         last = stem.with_name(f"{stem.name}-last.pt")
-        if last.exists():
-            done += int(torch_load_checked(last)["epoch"])
-    return done
+        state = torch_load_checked(last) if last.exists() else {"epoch": 0, "best_epoch": 0}
+        epoch = int(state["epoch"])
+        done += epoch
+        left += 0 if epoch and run_finished(epoch, int(state["best_epoch"]), cfg) else max(cfg.epochs - epoch, 0)
+    return done, left
 
 
 def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
@@ -49,11 +54,11 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
             step_s = float(step["step_median_s"].iloc[0])
             batches = int(np.ceil(len(data) / cfg.batch_size))
             hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600
-            done = min(epochs_done(P, study, kind), cfg.epochs * len(P.seeds))
+            done, left = epochs_done(P, study, kind)
             rows.append({"study": study, "model": kind, "batch": batch, "frames_per_item": int(data.inputs.shape[1]),
                          "step_s": step_s, "batches_per_epoch": batches, "epoch_s": step_s * batches,
                          "epochs": cfg.epochs, "seeds": len(P.seeds), "hours": hours, "epochs_done": done,
-                         "hours_left": hours * (1 - done / (cfg.epochs * len(P.seeds))),
+                         "hours_left": hours * left / (cfg.epochs * len(P.seeds)),
                          "threads": torch.get_num_threads()})
     return pd.DataFrame(rows)
 

@@ -76,6 +76,23 @@ def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_r
     return out
 
 
+def compare_prediction_modes(models: dict[str, Any], data: SequenceData, *, n_samples: int, level: float = 0.95,
+                             seed: int = 0, batch_size: int = 256) -> pd.DataFrame:
+    """Each model's metrics on ``data`` predicted two ways: one deterministic pass (dropout
+    off, what the validation loss of training uses) and MC dropout with ``n_samples`` passes
+    (what every reported number uses). One row per (name, mode)."""
+    from drfkit.uncertainty import predict
+
+    rows = []
+    for name, model in models.items():
+        for mode, s in (("deterministic", 0), ("mc_dropout", n_samples)):
+            torch.manual_seed(seed)
+            pred = predict(model, data.inputs, n_samples=s, batch_size=batch_size)
+            rows.append({"checkpoint": name, "epoch": model.checkpoint_meta.get("epoch"), "mode": mode,
+                         **prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)})
+    return pd.DataFrame(rows)
+
+
 def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = METRICS) -> pd.DataFrame:
     """Mean, 95 % t-interval half-width and seed count of ``values`` grouped ``by``.
 

@@ -70,6 +70,8 @@ SPECS: dict[str, Spec] = {
     "pend_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "pend_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "pend_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
+    "pend_patience": Spec("int", "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                          "stop a run after this many epochs without a better validation NLL"),
     # -- pedestrian data ---------------------------------------------------------------------
     "ped_source": Spec("str", "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
     "nuscenes_root": Spec("str", "'' (none) or a folder holding <nuscenes_version>/sample.json ..."),
@@ -118,7 +120,7 @@ SPECS: dict[str, Spec] = {
 _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
-_PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr"]
+_PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",
              "ped_data_seed", "sim_detector"]

@@ -28,6 +28,18 @@ def pick_device(device: str) -> torch.device:
     return torch.device(device)
 
 
+def setup(threads: int, seed: int, device: str) -> torch.device:
+    """Threads, deterministic algorithms, seeds and the device: what every entry point
+    (a notebook, ``python -m drfkit.studies``) fixes before it computes anything."""
+    if threads:
+        torch.set_num_threads(threads)
+    # cuBLAS is only deterministic with a fixed workspace; must be set before its first call
+    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    seed_everything(seed)
+    return pick_device(device)  # fail now, not after an hour of CPU training
+
+
 def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Params, NotebookTimer]:
     """Validate the parameters defined in ``namespace`` (a notebook's ``globals()``).
 
@@ -36,11 +48,6 @@ def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Params, No
     on CPU.
     """
     params = validate(notebook, notebook_globals(namespace))
-    if params.threads:
-        torch.set_num_threads(params.threads)
-    os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    torch.use_deterministic_algorithms(True, warn_only=True)
-    seed_everything(params.seeds[0])
-    pick_device(params.device)  # fail now, not after an hour of CPU training
+    setup(params.threads, params.seeds[0], params.device)
     timer = NotebookTimer(params.profile, notebook, params.as_dict())
     return params, timer

@@ -95,12 +95,19 @@ def study_models(P, study: str) -> list[str]:
     return list(P.pend_models if study == "pendulum" else P.ped_models)
 
 
+_TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once
+
+
 def target_statistics(P) -> dict[str, float]:
     """Mean and standard deviation of the training depths (valid frames), rounded to cm so
     the configuration (and the checkpoint names hashed from it) is stable."""
-    train = pedestrian_data(P, "train")
-    depths = train.targets[train.mask] if train.mask is not None else train.targets
-    return {"target_offset": round(float(depths.mean()), 2), "target_scale": round(float(depths.std()), 2)}
+    key = param_hash(_pedestrian_data_key(P))
+    if key not in _TARGET_STATISTICS:
+        train = pedestrian_data(P, "train")
+        depths = train.targets[train.mask] if train.mask is not None else train.targets
+        _TARGET_STATISTICS[key] = {"target_offset": round(float(depths.mean()), 2),
+                                   "target_scale": round(float(depths.std()), 2)}
+    return dict(_TARGET_STATISTICS[key])
 
 
 def model_config(study: str, kind: str, P=None) -> dict[str, Any]:
@@ -118,7 +125,8 @@ def model_config(study: str, kind: str, P=None) -> dict[str, Any]:
 
 def train_config(P, study: str, kind: str, seed: int) -> TrainConfig:
     if study == "pendulum":
-        return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed)
+        return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed,
+                           patience=P.pend_patience)
     if kind == "monoloco":  # Monoloco's own schedule (REFERENCE §3): StepLR(20, 0.9), single frames
         return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
                            seed=seed, lr_step=20, lr_gamma=0.9, framewise=True)
@@ -127,7 +135,9 @@ def train_config(P, study: str, kind: str, seed: int) -> TrainConfig:
 
 def checkpoint_stem(P, study: str, kind: str, seed: int):
     cfg = model_config(study, kind, P)
-    key = param_hash({"model": cfg, "train": vars(train_config(P, study, kind, seed)),
+    # patience decides when a run stops, not what its epochs compute: same run, same files
+    train = {k: v for k, v in vars(train_config(P, study, kind, seed)).items() if k != "patience"}
+    key = param_hash({"model": cfg, "train": train,
                       "data": STUDIES[study]["key"](P)}, 8)
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 
@@ -184,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     from drfkit.params import ParameterError, load_profile, notebook_params, validate
-    from drfkit.runtime import seed_everything
+    from drfkit.runtime import setup
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
@@ -206,10 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    torch.use_deterministic_algorithms(True, warn_only=True)
-    seed_everything(P.seeds[0])
+    setup(args.threads or P.threads, P.seeds[0], P.device)
     results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None)
     for (kind, seed), res in results.items():
         print(f"{args.study} {kind} seed {seed}: {res.best_path}")

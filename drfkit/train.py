@@ -87,11 +87,14 @@ class TrainConfig:
     lr_step: int | None = None  # StepLR step (epochs); None = constant lr
     lr_gamma: float = 1.0
     framewise: bool = False  # train on single frames (Monoloco)
+    patience: int = 0  # stop after this many epochs without a better validation loss; 0 = never
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
             if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
                 raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {getattr(self, name)!r}")
+        if not isinstance(self.patience, int) or isinstance(self.patience, bool) or self.patience < 0:
+            raise ValueError(f"TrainConfig.patience must be an integer >= 0 (0 = no early stop), got {self.patience!r}")
         if not (0 < self.lr < 1):
             raise ValueError(f"TrainConfig.lr must be in (0, 1), got {self.lr!r}")
 
@@ -104,6 +107,14 @@ class TrainResult:
     best_epoch: int = 0
     best_val_loss: float = math.inf
     resumed_from: int = 0
+    stopped_early: bool = False  # ended by ``patience`` before ``epochs``
+
+
+def device_label(device: torch.device) -> str:
+    """What trained an epoch, for the history: 'cpu' or 'cuda (<GPU name>)'."""
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    return device.type
 
 
 def _epoch_order(n: int, seed: int, epoch: int) -> torch.Tensor:
@@ -126,11 +137,25 @@ def evaluate_loss(model, data: SequenceData, batch_size: int, device: torch.devi
     return total / max(weight, 1)
 
 
+# When to stop, not what an epoch computes: epoch e is the same whatever these say, so they
+# are left out of the fingerprint (and a finished or early-stopped run can be extended).
+STOPPING_FIELDS = ("epochs", "patience")
+
+
 def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -> str:
-    """What a resume must agree on. The epoch count is left out: epoch e of a longer run is
-    identical to epoch e of a shorter one, so a finished run can be extended."""
-    train = {k: v for k, v in vars(train_cfg).items() if k != "epochs"}
+    """What a resume must agree on: everything but ``STOPPING_FIELDS``."""
+    train = {k: v for k, v in vars(train_cfg).items() if k not in STOPPING_FIELDS}
     return param_hash({"model": config, "train": train, "data": data_key})
+
+
+def patience_exhausted(epoch: int, best_epoch: int, patience: int) -> bool:
+    """True when ``patience`` (> 0) epochs have passed since the best validation loss."""
+    return patience > 0 and epoch - best_epoch >= patience
+
+
+def run_finished(epoch: int, best_epoch: int, cfg: TrainConfig) -> bool:
+    """Whether a run at ``epoch`` (best at ``best_epoch``) has nothing left to train."""
+    return epoch >= cfg.epochs or patience_exhausted(epoch, best_epoch, cfg.patience)
 
 
 def train_model(
@@ -179,11 +204,14 @@ def train_model(
         optimiser.load_state_dict(state["optimiser"])
         scheduler.load_state_dict(state["scheduler"])
         torch.set_rng_state(state["rng_torch"])
+        if device.type == "cuda" and state.get("rng_cuda") is not None:
+            torch.cuda.set_rng_state(state["rng_cuda"], device)  # dropout masks on the GPU
         start_epoch = state["epoch"]
         result.history = state["history"]
         result.best_epoch, result.best_val_loss = state["best_epoch"], state["best_val_loss"]
         result.resumed_from = start_epoch
-        if start_epoch >= cfg.epochs and best_path.exists():
+        if run_finished(start_epoch, result.best_epoch, cfg) and best_path.exists():
+            result.stopped_early = start_epoch < cfg.epochs
             return result  # finished: a cache hit
 
     bar = None
@@ -193,6 +221,7 @@ def train_model(
         bar = tqdm(total=cfg.epochs, initial=start_epoch, desc=stem.name, mininterval=2.0,
                    file=sys.stderr, leave=False)
     end_epoch = cfg.epochs if stop_after_epochs is None else min(cfg.epochs, start_epoch + stop_after_epochs)
+    trained_on = device_label(device)
     for epoch in range(start_epoch, end_epoch):
         t0 = time.perf_counter()
         model.train()
@@ -221,7 +250,8 @@ def train_model(
         train_loss = total / count
         val_loss = evaluate_loss(model, val, max(cfg.batch_size, 256), device)
         result.history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
-                               "lr": optimiser.param_groups[0]["lr"], "seconds": time.perf_counter() - t0})
+                               "lr": optimiser.param_groups[0]["lr"], "seconds": time.perf_counter() - t0,
+                               "device": trained_on})
         if val_loss < result.best_val_loss:
             result.best_val_loss, result.best_epoch = val_loss, epoch + 1
             atomic_torch_save(best_path, {
@@ -232,11 +262,15 @@ def train_model(
             "format": CHECKPOINT_FORMAT, "fingerprint": fp, "epoch": epoch + 1,
             "model": model.state_dict(), "optimiser": optimiser.state_dict(),
             "scheduler": scheduler.state_dict(), "rng_torch": torch.get_rng_state(),
+            "rng_cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
             "history": result.history, "best_epoch": result.best_epoch,
             "best_val_loss": result.best_val_loss})
         if bar is not None:
             bar.update(1)
             bar.set_postfix(train=f"{train_loss:.3f}", val=f"{val_loss:.3f}", refresh=False)
+        if patience_exhausted(epoch + 1, result.best_epoch, cfg.patience):
+            result.stopped_early = epoch + 1 < cfg.epochs
+            break
     if bar is not None:
         bar.close()
     return result
@@ -260,15 +294,50 @@ def load_checkpoint(path: str | Path, device: torch.device | str = "cpu"):
     return model.to(device).eval()
 
 
+def load_latest(checkpoint_stem: str | Path, device: torch.device | str = "cpu"):
+    """The model of a run's LAST epoch (``<stem>-last.pt`` weights, the configuration of
+    ``<stem>-best.pt``), in eval mode, with ``checkpoint_meta['epoch']`` set; to compare
+    the selected checkpoint with where training ended."""
+    best = load_checkpoint(f"{checkpoint_stem}-best.pt", device)
+    state = torch_load_checked(f"{checkpoint_stem}-last.pt")
+    best.load_state_dict(state["model"])
+    best.checkpoint_meta = {"epoch": state["epoch"], "val_loss": state["history"][-1]["val_loss"]}
+    return best.eval()
+
+
+def selection_audit(curves, patience: int):
+    """Per (model, seed) of a training-curves frame (``history_frame`` rows with ``model`` and
+    ``seed`` columns): epochs trained, the best epoch and validation loss, the final validation
+    loss, and the longest wait between two successive improvements. If that wait is shorter than
+    ``patience`` in every run, the early stop never ended a run that would still improve within
+    what was observed.
+    """
+    import pandas as pd
+
+    rows = []
+    for (kind, seed), run in curves.groupby(["model", "seed"], sort=False):
+        val = run.sort_values("epoch")["val_loss"].to_numpy()
+        best, last_improvement, longest_wait = math.inf, 0, 0
+        for epoch, v in enumerate(val, 1):
+            if v < best:
+                longest_wait, best, last_improvement = max(longest_wait, epoch - last_improvement), v, epoch
+        rows.append({"model": kind, "seed": seed, "epochs": len(val), "best_epoch": last_improvement,
+                     "best_val_loss": best, "final_val_loss": float(val[-1]), "longest_wait": longest_wait,
+                     "patience": patience, "devices": ", ".join(sorted(set(run.get("device", pd.Series(["cpu"])))))})
+    return pd.DataFrame(rows)
+
+
 def history_frame(history: list[dict[str, float]]):
     import pandas as pd
 
-    return pd.DataFrame(history, columns=["epoch", "train_loss", "val_loss", "lr", "seconds"])
+    frame = pd.DataFrame(history, columns=["epoch", "train_loss", "val_loss", "lr", "seconds", "device"])
+    # epochs recorded before the 'device' field existed were all trained on CPU in this book
+    return frame.fillna({"device": "cpu"})
 
 
 def count_parameters(model) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model",
-           "load_checkpoint", "evaluate_loss", "history_frame", "count_parameters"]
+__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model", "run_finished",
+           "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "history_frame", "count_parameters"]

@@ -46,3 +46,27 @@ def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
     assert row.loc[("pendulum", "no_dynamics"), "hours_left"] == pytest.approx(
         row.loc[("pendulum", "no_dynamics"), "hours"] / 2, rel=1e-4)
     assert row.loc[("pendulum", "drf"), "epochs_done"] == 0
+
+
+def test_budget_counts_a_run_stopped_by_patience_as_finished(tmp_path, monkeypatch):
+    from drfkit import studies
+    import torch
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values.update(profile="tiny", pend_train_sequences=4, pend_val_sequences=2, pend_test_sequences=2,
+                  pend_seq_len=6, pend_batch_size=2, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=5,
+                  pend_patience=1, seeds=[0])
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump(values))
+    from drfkit.params import load_profile, notebook_params, validate
+
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(str(path))))
+    stem = studies.checkpoint_stem(P, "pendulum", "no_dynamics", 0)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    # a resume state at epoch 3 whose best was epoch 2: patience 1 is used up, so nothing is left
+    torch.save({"epoch": 3, "best_epoch": 2}, stem.with_name(f"{stem.name}-last.pt"))
+    assert budget.epochs_done(P, "pendulum", "no_dynamics") == (3, 0)
+    torch.save({"epoch": 3, "best_epoch": 3}, stem.with_name(f"{stem.name}-last.pt"))
+    assert budget.epochs_done(P, "pendulum", "no_dynamics") == (3, 2)
+    assert studies.train_config(P, "pendulum", "no_dynamics", 0).patience == 1

@@ -47,3 +47,22 @@ def test_cli_rejects_what_the_notebooks_would_never_use(tiny_profile, capsys, ar
 def test_cli_rejects_unknown_profile(capsys):
     assert studies.main(["--profile", "no_such_profile", "--study", "pendulum"]) == 2
     assert "known profiles" in capsys.readouterr().err
+
+
+def test_patience_does_not_rename_checkpoints(tiny_profile):
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
+    patient = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile))
+                       | {"pend_patience": 7})
+    assert studies.train_config(patient, "pendulum", "drf", 0).patience == 7
+    assert studies.checkpoint_stem(P, "pendulum", "drf", 0) == studies.checkpoint_stem(patient, "pendulum", "drf", 0)
+
+
+def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatch):
+    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile))
+                 | {"ped_n_scenes": 4, "ped_frames_per_scene": 4, "ped_data_seed": 77})
+    reads = []
+    real = studies.pedestrian_data
+    monkeypatch.setattr(studies, "pedestrian_data", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
+    first = studies.target_statistics(P)
+    assert studies.target_statistics(P) == first and reads == ["train"]
+    assert first["target_scale"] > 0

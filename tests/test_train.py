@@ -172,3 +172,67 @@ def test_frames_flattens_only_real_frames():
     assert frames.targets.shape == (3, 1, 1)
     assert frames.targets.flatten().tolist() == [0.0, 1.0, 3.0]
     assert np.all(frames.inputs[:, 0, 0, 0].numpy() == [0.0, 1.0, 3.0])
+
+
+def test_patience_stops_after_no_improvement_and_a_rerun_is_a_cache_hit(tmp_path, monkeypatch):
+    import drfkit.train as train_mod
+
+    train, val = tiny_data()
+    cfg = model_config("pendulum", "no_dynamics")
+    val_losses = iter([1.0, 0.5, 0.7, 0.6, 0.9, 0.1, 0.05, 0.01])  # best at epoch 2, then 2 worse epochs
+    monkeypatch.setattr(train_mod, "evaluate_loss", lambda *a, **k: next(val_losses))
+    patient = TrainConfig(epochs=8, lr=3e-3, batch_size=4, seed=0, patience=2)
+    res = train_model(cfg, train, val, patient, tmp_path / "p", progress=False)
+    assert len(res.history) == 4 and res.best_epoch == 2 and res.stopped_early
+    assert load_checkpoint(res.best_path).checkpoint_meta["epoch"] == 2
+    again = train_model(cfg, train, val, patient, tmp_path / "p", progress=False)
+    assert again.resumed_from == 4 and len(again.history) == 4 and again.stopped_early  # nothing retrained
+    # patience is a stopping rule, not part of the run: without it the same run goes on to 8 epochs
+    longer = train_model(cfg, train, val, TrainConfig(epochs=8, lr=3e-3, batch_size=4, seed=0), tmp_path / "p",
+                         progress=False)
+    assert longer.resumed_from == 4 and len(longer.history) == 8 and longer.best_epoch == 8
+    assert not longer.stopped_early
+
+
+def test_history_records_the_device_of_every_epoch(tmp_path):
+    from drfkit.train import history_frame
+
+    train, val = tiny_data()
+    res = train_model(model_config("pendulum", "no_dynamics"), train, val, train_cfg(epochs=2), tmp_path / "d",
+                      progress=False)
+    frame = history_frame(res.history + [{"epoch": 3, "train_loss": 0.0, "val_loss": 0.0, "lr": 0.1, "seconds": 1}])
+    assert frame["device"].tolist() == ["cpu", "cpu", "cpu"]  # the last row predates the field
+
+
+@pytest.mark.parametrize("patience", [-1, 1.5, True])
+def test_bad_patience_is_rejected(patience):
+    with pytest.raises(ValueError, match="patience"):
+        TrainConfig(epochs=2, lr=1e-3, batch_size=2, seed=0, patience=patience)
+
+
+def test_selection_audit_finds_best_epoch_and_longest_wait():
+    import pandas as pd
+
+    from drfkit.train import selection_audit
+
+    val = [3.0, 2.0, 2.5, 2.6, 1.0, 1.5, 1.6, 1.7]  # improvements at epochs 1, 2, 5: longest wait 3
+    curves = pd.DataFrame({"model": "drf", "seed": 0, "epoch": range(1, 9), "val_loss": val,
+                           "device": ["cpu"] * 4 + ["cuda (X)"] * 4})
+    row = selection_audit(curves, patience=4).iloc[0]
+    assert (row["epochs"], row["best_epoch"], row["best_val_loss"], row["final_val_loss"]) == (8, 5, 1.0, 1.7)
+    assert row["longest_wait"] == 3 and row["devices"] == "cpu, cuda (X)"
+
+
+def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
+    import drfkit.train as train_mod
+    from drfkit.train import load_latest
+
+    train, val = tiny_data()
+    val_losses = iter([1.0, 2.0, 3.0])  # best is epoch 1, training ends at 3
+    monkeypatch.setattr(train_mod, "evaluate_loss", lambda *a, **k: next(val_losses))
+    res = train_model(model_config("pendulum", "no_dynamics"), train, val, train_cfg(epochs=3), tmp_path / "l",
+                      progress=False)
+    best, last = load_checkpoint(res.best_path), load_latest(tmp_path / "l")
+    assert best.checkpoint_meta["epoch"] == 1 and last.checkpoint_meta["epoch"] == 3 and not last.training
+    assert state_equal(last.state_dict(), torch_load_checked(res.last_path)["model"])
+    assert not state_equal(last.state_dict(), best.state_dict())

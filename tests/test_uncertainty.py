@@ -234,3 +234,25 @@ def test_predict_rejects_nan_inputs(kind, input_kind):
     x[0, 0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         predict(model, x, n_samples=2)
+
+
+def test_compare_prediction_modes_deterministic_has_no_epistemic_part():
+    import torch
+
+    from drfkit.data.pendulum import generate_pendulum
+    from drfkit.evaluate import compare_prediction_modes, prediction_metrics
+    from drfkit.models import build_model, default_config
+    from drfkit.train import SequenceData
+    from drfkit.uncertainty import predict
+
+    arrays = generate_pendulum(3, 7, 0.5, seed=1)
+    data = SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
+    torch.manual_seed(0)
+    model = build_model(default_config("no_dynamics", "pendulum", 2)).eval()
+    model.checkpoint_meta = {"epoch": 7}
+    table = compare_prediction_modes({"best": model}, data, n_samples=5, seed=3)
+    assert table["mode"].tolist() == ["deterministic", "mc_dropout"] and (table["epoch"] == 7).all()
+    det = predict(model, data.inputs, n_samples=0)  # dropout off: total sigma is the aleatoric one
+    expected = prediction_metrics(det.mean, det.aleatoric, data.targets)
+    assert table.iloc[0]["nll"] == expected["nll"] and table.iloc[0]["mae"] == expected["mae"]
+    assert table.iloc[1]["mpiw"] > table.iloc[0]["mpiw"]  # the dropout spread widens the intervals

@@ -68,15 +68,19 @@ summary.loc[paper_levels, cols].round(4)
 # are the paper's values.
 
 # %%
-pend = summary[summary["study"].eq("pendulum") & summary["noise"].isin(P.pend_eval_max_noise)]
-ped = summary[summary["study"].eq("pedestrians") & summary["noise"].isin(P.ped_eval_p)]
-if "pendulum" in models:
-    fig = plot_mae_bars(pend, P.pend_models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise")
-    save_figure(P.profile, "pendulum_mae", fig)
-    plt.show()
-if "pedestrians" in models:
-    fig = plot_mae_bars(ped, P.ped_models, PEDESTRIAN_MAE, ylabel="depth MAE (m)", level_name="p", width=7)
-    save_figure(P.profile, "pedestrians_mae", fig)
+# what differs between the two studies' figures: the paper's values and the labels
+FIGURES = {
+    "pendulum": {"mae": PENDULUM_MAE, "picp_mpiw": PENDULUM_PICP_MPIW, "per_level_paper": False,
+                 "ylabel": "MAE (cos θ, sin θ)", "level_name": "max noise", "width": 6.0},
+    "pedestrians": {"mae": PEDESTRIAN_MAE, "picp_mpiw": PEDESTRIAN_PICP_MPIW, "per_level_paper": True,
+                    "ylabel": "depth MAE (m)", "level_name": "p", "width": 7.0},
+}
+at_paper_noise = {s: summary[summary["study"].eq(s) & summary["noise"].isin(paper_noise[s])] for s in models}
+for study in models:
+    f = FIGURES[study]
+    fig = plot_mae_bars(at_paper_noise[study], studies.study_models(P, study), f["mae"], ylabel=f["ylabel"],
+                        level_name=f["level_name"], width=f["width"])
+    save_figure(P.profile, f"{study}_mae", fig)
     plt.show()
 
 # %% [markdown]
@@ -89,15 +93,11 @@ curve_summary = {s: summarise(c, ["model", "noise", "dropout_p"]) for s, c in cu
 _ = save_table(P.profile, "ood_picp_mpiw", pd.concat([c.assign(study=s) for s, c in curve_summary.items()]))
 
 # %%
-if "pendulum" in models:
-    fig = plot_picp_mpiw(curve_summary["pendulum"], P.pend_models, PENDULUM_PICP_MPIW, level_name="max noise",
-                         nominal=P.interval_level)
-    save_figure(P.profile, "pendulum_picp_mpiw", fig)
-    plt.show()
-if "pedestrians" in models:
-    fig = plot_picp_mpiw(curve_summary["pedestrians"], P.ped_models, PEDESTRIAN_PICP_MPIW, per_level_paper=True,
-                         level_name="p", nominal=P.interval_level)
-    save_figure(P.profile, "pedestrians_picp_mpiw", fig)
+for study in models:
+    f = FIGURES[study]
+    fig = plot_picp_mpiw(curve_summary[study], studies.study_models(P, study), f["picp_mpiw"],
+                         per_level_paper=f["per_level_paper"], level_name=f["level_name"], nominal=P.interval_level)
+    save_figure(P.profile, f"{study}_picp_mpiw", fig)
     plt.show()
 
 # %% [markdown]
@@ -135,11 +135,11 @@ ood_ped = [p for p in P.ped_eval_p if p > P.ped_train_p]
 ood_pend = [m for m in P.pend_eval_max_noise if m > P.pend_train_max_noise]
 rows = []
 if "pendulum" in models:
-    rows += [claims.c1_pendulum_mae_ordering(pend, P.pend_eval_max_noise),
+    rows += [claims.c1_pendulum_mae_ordering(at_paper_noise["pendulum"], P.pend_eval_max_noise),
              claims.c2_pendulum_picp_mpiw(curve_summary["pendulum"], P.pend_eval_max_noise)]
 if "pedestrians" in models:
     rows += [claims.c3_pedestrian_ood_gain(evals[evals["study"] == "pedestrians"], ood_ped),
-             claims.c4_in_distribution_parity(ped, P.ped_train_p)]
+             claims.c4_in_distribution_parity(at_paper_noise["pedestrians"], P.ped_train_p)]
 shifted = {"pendulum": ood_pend, "pedestrians": ood_ped}
 rows.append(claims.c5_intervals_under_shift(
     summary, [(s, lv) for s in models for lv in shifted[s]],
