@@ -321,9 +321,12 @@ def selection_audit(curves, patience: int):
         for epoch, v in enumerate(val, 1):
             if v < best:
                 longest_wait, best, last_improvement = max(longest_wait, epoch - last_improvement), v, epoch
+        devices = run["device"] if "device" in run else pd.Series("cpu", index=run.index)
+        per_device = [(d, len(g), g.median()) for d, g in run["seconds"].groupby(devices, sort=True)]
         rows.append({"model": kind, "seed": seed, "epochs": len(val), "best_epoch": last_improvement,
                      "best_val_loss": best, "final_val_loss": float(val[-1]), "longest_wait": longest_wait,
-                     "patience": patience, "devices": ", ".join(sorted(set(run.get("device", pd.Series(["cpu"])))))})
+                     "patience": patience, "epoch_s_by_device": "; ".join(
+                         f"{device}: {n} epochs, median {sec:.3g} s" for device, n, sec in per_device)})
     return pd.DataFrame(rows)
 
 

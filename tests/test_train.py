@@ -217,10 +217,11 @@ def test_selection_audit_finds_best_epoch_and_longest_wait():
 
     val = [3.0, 2.0, 2.5, 2.6, 1.0, 1.5, 1.6, 1.7]  # improvements at epochs 1, 2, 5: longest wait 3
     curves = pd.DataFrame({"model": "drf", "seed": 0, "epoch": range(1, 9), "val_loss": val,
-                           "device": ["cpu"] * 4 + ["cuda (X)"] * 4})
+                           "seconds": [10, 30, 20, 20, 1, 2, 3, 4], "device": ["cpu"] * 4 + ["cuda (X)"] * 4})
     row = selection_audit(curves, patience=4).iloc[0]
     assert (row["epochs"], row["best_epoch"], row["best_val_loss"], row["final_val_loss"]) == (8, 5, 1.0, 1.7)
-    assert row["longest_wait"] == 3 and row["devices"] == "cpu, cuda (X)"
+    assert row["longest_wait"] == 3
+    assert row["epoch_s_by_device"] == "cpu: 4 epochs, median 20 s; cuda (X): 4 epochs, median 2.5 s"
 
 
 def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
