@@ -153,7 +153,9 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     overrides = manifest.get("overrides") or {}
     last_run = (f"last pipeline run: {', '.join(pipe.get('notebooks', [])) or 'n/a'}"
                 + (f" with --set {' '.join(f'{k}={v}' for k, v in overrides.items())}" if overrides else "")
-                + f", status {pipe.get('status', 'n/a')}, {pipe.get('total_s', 'n/a')} s")
+                + f", status {pipe.get('status', 'n/a')}"
+                + (f", {pipe['total_s']} s" if pipe.get("total_s") is not None else "")
+                + (f": {pipe['note']}" if pipe.get("note") else ""))
     lines = [f"Profile `{profile}`, produced by `{command}` "
              f"({last_run}, on {env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
              f"{(env.get('git') or {}).get('commit', '?')}).",

@@ -21,3 +21,13 @@ def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monke
     assert "last pipeline run: 03_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
     assert "| C6 |" in text and "Not evaluated yet in this profile: C1" in text
     assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 | 200 × 3 | 300 |" in text
+
+
+def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    claims.upsert("p", [claims.c6_speedup(3.0)])
+    (tmp_path / "p" / "manifest.json").write_text(json.dumps({
+        "pipeline": {"status": "interrupted", "total_s": None, "notebooks": ["05_competency_gating"],
+                     "note": "killed during 05_competency_gating"}}))
+    text = results_section("p", "make reproduce", False)
+    assert "status interrupted: killed during 05_competency_gating" in text and "None s" not in text
