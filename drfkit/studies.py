@@ -19,7 +19,7 @@ import torch
 from drfkit.io import atomic_write_csv, param_hash
 from drfkit.paths import data_dir, models_dir, tables_dir
 from drfkit.runtime import pick_device
-from drfkit.train import SequenceData, TrainConfig, TrainResult, history_frame, train_model
+from drfkit.train import SequenceData, TrainConfig, TrainResult, history_frame, naming_fields, train_model
 
 SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
 
@@ -135,9 +135,7 @@ def train_config(P, study: str, kind: str, seed: int) -> TrainConfig:
 
 def checkpoint_stem(P, study: str, kind: str, seed: int):
     cfg = model_config(study, kind, P)
-    # patience decides when a run stops, not what its epochs compute: same run, same files
-    train = {k: v for k, v in vars(train_config(P, study, kind, seed)).items() if k != "patience"}
-    key = param_hash({"model": cfg, "train": train,
+    key = param_hash({"model": cfg, "train": naming_fields(train_config(P, study, kind, seed)),
                       "data": STUDIES[study]["key"](P)}, 8)
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 

@@ -148,6 +148,12 @@ def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -
     return param_hash({"model": config, "train": train, "data": data_key})
 
 
+def naming_fields(train_cfg: TrainConfig) -> dict[str, Any]:
+    """The training fields that name a run's checkpoint files: all but ``patience``, which
+    only decides when the run stops (``epochs`` stays, as in names made before patience)."""
+    return {k: v for k, v in vars(train_cfg).items() if k != "patience"}
+
+
 def patience_exhausted(epoch: int, best_epoch: int, patience: int) -> bool:
     """True when ``patience`` (> 0) epochs have passed since the best validation loss."""
     return patience > 0 and epoch - best_epoch >= patience
@@ -342,5 +348,5 @@ def count_parameters(model) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model", "run_finished",
+__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model", "run_finished", "naming_fields",
            "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "history_frame", "count_parameters"]
