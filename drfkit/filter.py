@@ -252,12 +252,109 @@ def kalman_update(z: torch.Tensor, P: torch.Tensor, w: torch.Tensor, R: torch.Te
     return z_new, _symmetrise(P_new), K
 
 
+def _batched_diagonal(z, P, F, Q, w, R) -> bool:
+    """True when the arguments fit the fused step: z, w, Q, R (B, n); P, F (B, n, n); one dtype."""
+    if not all(isinstance(t, torch.Tensor) for t in (z, P, F, Q, w, R)) or z.ndim != 2:
+        return False
+    b, n = z.shape
+    return (P.shape == F.shape == (b, n, n) and Q.shape == w.shape == R.shape == (b, n)
+            and z.is_floating_point() and len({t.dtype for t in (z, P, F, Q, w, R)}) == 1
+            and len({t.device for t in (z, P, F, Q, w, R)}) == 1)
+
+
+def _bmv(A: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """A v for A (B, n, m), v (B, m) -> (B, n). The row-vector form v^T A^T runs several
+    times faster than A @ v[..., None] on CPU for small n."""
+    return (v.unsqueeze(-2) @ A.mT).squeeze(-2)
+
+
+class _FusedStep(torch.autograd.Function):
+    """kalman_predict + kalman_update for batched arguments with diagonal Q and R, as one
+    autograd node with a hand-derived backward. Shapes: z, q, w, r (B, n); P, F (B, n, n).
+
+    The same equations and Joseph form as the composed functions, with one difference:
+    K^T = S^-1 P- through ``cholesky_inverse`` of the Cholesky factor (one LAPACK call and
+    a matmul) instead of ``cholesky_solve`` (two triangular solves per item, about 3x
+    slower for a batch of 30 x 30 on CPU). S^-1 is kept for the backward, whose solve then
+    is a matmul too. On a batch of SPD 30 x 30 matrices the results agree with the composed
+    path to rounding (tests/test_filter.py checks values and gradients in float64).
+
+    Backward (G = sym(dL/dP_new), M = I - K, all products batched; P-, G, H symmetric):
+        J = M P- M^T + K R K^T:   dL/dM = 2 G M P-,  dL/dP- = M^T G M,
+                                  dL/dK = 2 G K R - dL/dM,  dL/dr = diag(K^T G K)
+        z_new = z- + K d:         dL/dK += g d^T,  dL/dd = K^T g,  dL/dz- = g - dL/dd
+        K^T = S^-1 P-:            Y = S^-1 (dL/dK)^T,  dL/dS = -Y K,  dL/dP- += Y + dL/dS,
+                                  dL/dr += diag(dL/dS)
+        P- = sym(F P F^T + Q):    H = sym(dL/dP-),  dL/dq = diag H,  dL/dF = H F (P + P^T),
+                                  dL/dP = F^T H F;  z- = F z: dL/dF += g- z^T, dL/dz = F^T g-
+    """
+
+    @staticmethod
+    def forward(ctx, z, P, F, q, w, r):
+        z_pred = _bmv(F, z)
+        P_pred = (F @ P) @ F.mT
+        P_pred.diagonal(dim1=-2, dim2=-1).add_(q)
+        P_pred = _symmetrise(P_pred)
+        S = P_pred.clone()
+        S.diagonal(dim1=-2, dim2=-1).add_(r)
+        S_inv = torch.cholesky_inverse(_safe_cholesky(S))
+        K = P_pred @ S_inv
+        innovation = w - z_pred
+        z_new = z_pred + _bmv(K, innovation)
+        I_minus_K = -K
+        I_minus_K.diagonal(dim1=-2, dim2=-1).add_(1.0)
+        P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
+        ctx.save_for_backward(z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
+        ctx.set_materialize_grads(False)
+        return z_new, _symmetrise(P_new), K
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, g_z, g_P, g_K):
+        z, P, F, r, P_pred, S_inv, K, M, innovation = ctx.saved_tensors
+        # dL/dK and dL/dr through the Joseph update and the mean update
+        g_K = torch.zeros_like(K) if g_K is None else g_K.clone()
+        g_r = GM = None
+        if g_P is not None:
+            G = _symmetrise(g_P.clone())
+            GM = G @ M
+            GK = G.sub_(GM)  # G K = G (I - M); G is not needed any more
+            g_r = (GK * K).sum(-2)
+            g_K.addcmul_(GK, r.unsqueeze(-2), value=2.0).baddbmm_(GM, P_pred, alpha=-2.0)
+        g_zp = g_w = None
+        if g_z is not None:
+            g_K.addcmul_(g_z.unsqueeze(-1), innovation.unsqueeze(-2))
+            g_w = _bmv(K.mT, g_z)
+            g_zp = g_z - g_w
+        # through K = P- S^-1: Y = S^-1 (dL/dK)^T; dL/dP- = M^T G M + Y + dL/dS with dL/dS = -Y K,
+        # and Y - Y K = Y M
+        Y = S_inv @ g_K.mT
+        g_S_diag = -(Y * K.mT).sum(-1)
+        g_r = g_S_diag if g_r is None else g_r.add_(g_S_diag)
+        g_Pp = Y @ M if GM is None else torch.baddbmm(Y @ M, M.mT, GM)
+        H = _symmetrise(g_Pp)
+        g_q = H.diagonal(dim1=-2, dim2=-1).clone()
+        HF = H @ F
+        g_F = HF @ (P + P.mT)
+        g_Pin = F.mT @ HF
+        g_zin = None
+        if g_zp is not None:
+            g_F.addcmul_(g_zp.unsqueeze(-1), z.unsqueeze(-2))
+            g_zin = _bmv(F.mT, g_zp)
+        return g_zin, g_Pin, g_F, g_q, g_w, g_r
+
+
 def kalman_step(z: torch.Tensor, P: torch.Tensor, F: torch.Tensor, Q: torch.Tensor,
                 w: torch.Tensor, R: torch.Tensor
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One full filter step: :func:`kalman_predict` then :func:`kalman_update`.
 
+    Batched arguments with diagonal noise (z, Q, w, R (B, n); P, F (B, n, n); the DRF's
+    case) take a fused path with a hand-written backward (``_FusedStep``), about twice as
+    fast; everything else (broadcasting, full noise, other batch shapes) the composed one.
     Returns z_new (..., n), P_new (..., n, n), K (..., n, n).
     """
+    if _batched_diagonal(z, P, F, Q, w, R):
+        return _FusedStep.apply(z, P, F, Q, w, R)
     z_pred, P_pred = kalman_predict(z, P, F, Q)
     return kalman_update(z_pred, P_pred, w, R)

@@ -272,6 +272,21 @@ def run_setting(model, inputs: torch.Tensor, mask: torch.Tensor, setting: str, *
 
 
 # --------------------------------------------------------------------------- timing
+def timing_subset(frames_per_sequence: torch.Tensor, max_frames: int) -> torch.Tensor:
+    """Indices (k,) of the test sequences timed: k evenly spaced over all N, the same every
+    run, with k = ceil(N * max_frames / total frames) so that about ``max_frames`` real frames
+    are timed (0, or a set no larger than that: every sequence). Evenly spaced, not the first
+    k, so a test set ordered by scene or noise is sampled across its whole range.
+    frames_per_sequence: (N,) real frames of each sequence."""
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 0:
+        raise ValueError(f"gating_timing_frames must be an int >= 0 (0 = every test frame), got {max_frames!r}")
+    n, total = frames_per_sequence.numel(), int(frames_per_sequence.sum())
+    if max_frames == 0 or total <= max_frames:
+        return torch.arange(n)
+    k = math.ceil(n * max_frames / total)
+    return torch.linspace(0, n - 1, k, dtype=torch.float64).round().long()
+
+
 def _sync(device: torch.device) -> None:
     if device.type == "cuda":
         torch.cuda.synchronize(device)
@@ -397,7 +412,7 @@ def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: 
 @torch.no_grad()
 def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float | None = None,
                   level: float = 0.95, seed: int = 0, min_run_time: float = 0.3, device=None,
-                  thresholds: dict[str, float] | None = None) -> pd.DataFrame:
+                  thresholds: dict[str, float] | None = None, timing_frames: int = 0) -> pd.DataFrame:
     """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
 
     Metrics: the features run once, then each setting's ``uncertainty_stage`` with the dropout
@@ -405,7 +420,12 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     on this test set (drawn with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
     adds Kalman-gain rows, each with its random twin 'random:<name>' (used by ``sweep_gate``).
 
-    Times, per real frame, all measured in this call on the same inputs (interleaved medians):
+    Times, per real frame, all measured in this call on the same inputs (interleaved medians),
+    on about ``timing_frames`` real frames of evenly spaced test sequences (``timing_subset``;
+    0: all of them); the metrics always use every test sequence. Per-frame times of a batch of
+    thousands of frames do not depend on its size, and timing ~46 settings x >= 5 rounds on
+    every frame of a big test set takes an hour on 2 cores. On the timed subset a random twin
+    draws as many frames as its Kalman-gain gate selects there (equal compute where timed):
       features_ms  the features (encoder + filter; with gains for Kalman-gain rows only);
       head_ms      the uncertainty stage alone (scoring, selection, gather, head, scatter);
       time_ms      features_ms + head_ms: the inference of the setting. Settings differ only in
@@ -414,8 +434,8 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
       whole_ms     the four settings' whole inference timed in one piece (``run_setting``), a
                    check on time_ms (NaN for the extra thresholds).
     Returns one row per setting: setting, threshold, fraction, n_selected, picp (fraction),
-    mpiw, nll, mae, time_ms, head_ms, features_ms, whole_ms, batch_ms (time_ms for the whole
-    batch), frames, threads.
+    mpiw, nll, mae, time_ms, head_ms, features_ms, whole_ms, frames (real frames, metrics),
+    timed_frames (real frames of the timed subset), batch_ms (time_ms x timed_frames), threads.
     """
     n_samples = check_n_samples(n_samples)
     p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
@@ -447,36 +467,51 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
 
         evaluate("no_dropout", "no_dropout", {})
         evaluate("always", "always", {})
+        twin_of: dict[str, str] = {}  # random twin -> its Kalman-gain row
         for name, thr in {"kalman_gain": gate.threshold, **(thresholds or {})}.items():
             n_sel = int(evaluate(name, "kalman_gain", {**kg, "threshold": thr}).selected.sum())
             twin = "random" if name == "kalman_gain" else f"random:{name}"
             pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
             assert int(pred.selected.sum()) == n_sel
             rows[-1]["threshold"] = thr
+            twin_of[twin] = name
 
-        stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h, gains, real, s, **common, **e))
-                     for name, (setting, extra) in variants.items()}
+        # ---- times, on the timed subset only
+        idx = timing_subset(real.sum(dim=1), timing_frames).to(device)
+        whole_set = idx.numel() == x.shape[0]
+        x_t, real_t = (x, real) if whole_set else (x[idx], real[idx])
+        h_t, gains_t = (h, gains) if whole_set else model.features(x_t, return_gains=True)
+        scores_t = competency_score(gains_t, gate.direction)
+        timed = {name: (setting, extra if setting != "random" else
+                        {**extra, "n_random": int(apply_gating(scores_t, variants[twin_of[name]][1]["threshold"],
+                                                               real_t).sum())})
+                 for name, (setting, extra) in variants.items()}
+        stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h_t, gains_t, real_t, s,
+                                                                         **common, **e))
+                     for name, (setting, extra) in timed.items()}
         head_s = measure_interleaved(stage_fns, min_run_time / 2, device)
-        whole_fns = {name: (lambda s=variants[name][0], e=variants[name][1]:
-                            run_setting(model, x, real, s, **common, **e)) for name in SETTINGS}
-        whole_fns["features"] = lambda: model.features(x)
-        whole_fns["features_gains"] = lambda: model.features(x, return_gains=True)
+        whole_fns = {name: (lambda s=timed[name][0], e=timed[name][1]:
+                            run_setting(model, x_t, real_t, s, **common, **e)) for name in SETTINGS}
+        whole_fns["features"] = lambda: model.features(x_t)
+        whole_fns["features_gains"] = lambda: model.features(x_t, return_gains=True)
         whole_s = measure_interleaved(whole_fns, min_run_time, device, min_rounds=7)
     finally:
         model.train(was)
+    n_timed = int(real_t.sum())
     frame = pd.DataFrame(rows)
     frame["fraction"] = frame["n_selected"] / n_real
     gains_used = frame["setting"].isin(["kalman_gain", *(thresholds or {})])
-    per_frame = 1e3 / n_real
+    per_frame = 1e3 / n_timed
     frame["head_ms"] = frame["setting"].map(head_s) * per_frame
     frame["features_ms"] = np.where(gains_used, whole_s["features_gains"], whole_s["features"]) * per_frame
     frame["time_ms"] = frame["features_ms"] + frame["head_ms"]
     frame["whole_ms"] = frame["setting"].map(whole_s) * per_frame
-    frame["batch_ms"] = frame["time_ms"] * n_real
     frame["frames"] = n_real
+    frame["timed_frames"] = n_timed
+    frame["batch_ms"] = frame["time_ms"] * n_timed
     frame["threads"] = torch.get_num_threads()
     order = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae", "time_ms",
-             "head_ms", "features_ms", "whole_ms", "batch_ms", "frames", "threads"]
+             "head_ms", "features_ms", "whole_ms", "batch_ms", "frames", "timed_frames", "threads"]
     return frame[order]
 
 
@@ -532,7 +567,9 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
 
     Test: the ``test`` split at ``evaluation_level``. Validation: the ``val`` split (other
     sequences, other motions / scenes) at ``val_noise``, by default the test's noise level: the
-    gate is tuned, on held-out sequences, for the condition it will run in. Returns
+    gate is tuned, on held-out sequences, for the condition it will run in. Times are measured on
+    about ``P.gating_timing_frames`` frames of evenly spaced test sequences (0: all), metrics on
+    all of them. Returns
     {'table': one row per seed and setting, 'sweep': one row per seed, method and threshold,
     'validation': the candidate table per seed}.
     """
@@ -556,7 +593,8 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
                                    n_points=P.gating_sweep_points, level=P.interval_level, seed=seed,
                                    device=device)
         table, sweep = sweep_gate(model, gate, test, n_samples=P.n_samples, level=P.interval_level, seed=seed,
-                                  device=device, min_run_time=min_run_time)
+                                  device=device, min_run_time=min_run_time,
+                                  timing_frames=P.gating_timing_frames)
         ident = {"study": study, "seed": seed, "noise": level_, "val_noise": val_level}
         gate_info = {"direction": gate.direction, "rank_correlation": gate.rank_correlation,
                      "val_fraction": gate.val_fraction, "val_picp": gate.val_picp,
@@ -583,7 +621,8 @@ def paper_table() -> pd.DataFrame:
 __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
-    "GatedPrediction", "gated_head", "uncertainty_stage", "run_setting", "measure_interleaved", "Gate", "fit_gate",
+    "GatedPrediction", "gated_head", "uncertainty_stage", "run_setting", "timing_subset", "measure_interleaved",
+    "Gate", "fit_gate",
     "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "selected_fraction", "gating_study",
     "paper_table",
 ]

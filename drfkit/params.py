@@ -115,6 +115,9 @@ SPECS: dict[str, Spec] = {
     # -- gating ------------------------------------------------------------------------------
     "gating_picp_tolerance": Spec("float", "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),
     "gating_sweep_points": Spec("int", "an integer >= 2", lambda v: v >= 2),
+    "gating_timing_frames": Spec("int", "an integer >= 0 (0 = every test frame)", lambda v: v >= 0,
+                                 "about this many real frames, of evenly spaced test sequences, are what the "
+                                 "gating times are measured on; metrics use every test sequence"),
 }
 
 _COMMON = ["profile", "seeds", "device", "threads"]
@@ -128,7 +131,7 @@ _PED_TRAIN = ["ped_models", "ped_epochs", "ped_batch_size", "ped_lr", "monoloco_
               "monoloco_batch_size", "monoloco_lr"]
 _UNC = ["n_samples", "dropout_rates", "interval_level"]
 _TIMING = ["timing_batch_sizes", "timing_threads", "timing_min_run_time"]
-_GATING = ["gating_picp_tolerance", "gating_sweep_points"]
+_GATING = ["gating_picp_tolerance", "gating_sweep_points", "gating_timing_frames"]
 _EVAL = ["eval_studies"]
 
 NOTEBOOKS: dict[str, list[str]] = {

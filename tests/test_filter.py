@@ -185,13 +185,16 @@ def _log_uniform(gen, shape, dtype):
     return torch.pow(10.0, torch.empty(shape, dtype=torch.float64).uniform_(-6, 6, generator=gen)).to(dtype)
 
 
+@pytest.mark.parametrize("path", ["composed", "fused"])
 @pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
-def test_long_run_extreme_noise_keeps_P_valid(dtype):
+def test_long_run_extreme_noise_keeps_P_valid(dtype, path):
     gen = torch.Generator().manual_seed(4)
     b, n, T = 4, 5, 1000
     z = torch.zeros(b, n, dtype=dtype)
     P = torch.eye(n, dtype=dtype).expand(b, n, n)
     F = torch.linalg.qr(torch.randn(T, n, n, generator=gen, dtype=torch.float64))[0].to(dtype)
+    if path == "fused":  # a batched F takes the fused step (test_fused_path_is_taken_only_for_...)
+        F = F.unsqueeze(1).expand(T, b, n, n)
     Q = _log_uniform(gen, (T, b, n), dtype)
     R = _log_uniform(gen, (T, b, n), dtype)
     w = torch.randn(T, b, n, generator=gen, dtype=torch.float64).to(dtype)
@@ -263,7 +266,8 @@ def test_singular_S_gets_jitter_and_bad_covariances_raise():
 
 # --------------------------------------------------------------------------- (7) float32
 
-def test_float32_matches_float64():
+@pytest.mark.parametrize("path", ["composed", "fused"])
+def test_float32_matches_float64(path):
     rng = np.random.default_rng(5)
     n, T, b = 6, 30, 3
     runs = {}
@@ -273,6 +277,7 @@ def test_float32_matches_float64():
         rng = np.random.default_rng(5)
         for _ in range(T):
             F = torch.as_tensor(np.linalg.qr(rng.standard_normal((n, n)))[0], dtype=dtype)
+            F = F.expand(b, n, n) if path == "fused" else F
             q = torch.as_tensor(rng.uniform(0.01, 0.3, (b, n)), dtype=dtype)
             w = torch.as_tensor(rng.standard_normal((b, n)), dtype=dtype)
             r = torch.as_tensor(rng.uniform(0.1, 2.0, (b, n)), dtype=dtype)
@@ -283,12 +288,13 @@ def test_float32_matches_float64():
     torch.testing.assert_close(runs[torch.float32][1].double(), runs[torch.float64][1], rtol=1e-4, atol=1e-5)
 
 
-def test_float32_backward_runs():
+@pytest.mark.parametrize("shared_F", [False, True])
+def test_float32_backward_runs(shared_F):
     torch.manual_seed(6)
     b, n = 4, 30
     z = torch.zeros(b, n)
     P = torch.eye(n).expand(b, n, n)
-    F = (torch.eye(n) + 0.05 * torch.randn(b, n, n)).requires_grad_()
+    F = (torch.eye(n) + 0.05 * torch.randn(1 if shared_F else b, n, n)).requires_grad_()
     q = (0.1 * torch.rand(b, n) + 0.01).requires_grad_()
     w = torch.randn(b, n, requires_grad=True)
     r = (torch.rand(b, n) + 0.1).requires_grad_()
@@ -298,3 +304,86 @@ def test_float32_backward_runs():
     for t in (F, q, w, r):
         assert t.grad is not None and t.grad.dtype == torch.float32 and torch.isfinite(t.grad).all()
         assert t.grad.abs().sum() > 0
+
+
+# --------------------------------------------------------------------------- (8) the fused step
+# kalman_step takes a fused path (one autograd node, hand-written backward, S^-1 by
+# cholesky_inverse) for batched z, P, F, q, w, r with diagonal noise: the DRF's case.
+
+def _batched_args(b=4, n=5, dtype=torch.float64, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    A = torch.randn(b, n, n, generator=g, dtype=dtype)
+    return dict(z=torch.randn(b, n, generator=g, dtype=dtype),
+                P=A @ A.mT / n + 0.3 * torch.eye(n, dtype=dtype),
+                F=torch.eye(n, dtype=dtype) + 0.2 * torch.randn(b, n, n, generator=g, dtype=dtype),
+                Q=torch.rand(b, n, generator=g, dtype=dtype) + 0.05,
+                w=torch.randn(b, n, generator=g, dtype=dtype),
+                R=torch.rand(b, n, generator=g, dtype=dtype) + 0.1)
+
+
+def _composed(z, P, F, Q, w, R):
+    return kalman_update(*kalman_predict(z, P, F, Q), w, R)
+
+
+def test_fused_path_is_taken_only_for_batched_diagonal_arguments():
+    args = _batched_args()
+    leaf = {k: v.clone().requires_grad_() for k, v in args.items()}
+    assert type(kalman_step(**leaf)[0].grad_fn).__name__ == "_FusedStepBackward"
+    shared_F = {**leaf, "F": leaf["F"][0]}
+    assert type(kalman_step(**shared_F)[0].grad_fn).__name__ != "_FusedStepBackward"
+    full_R = {**leaf, "R": torch.diag_embed(leaf["R"])}
+    assert type(kalman_step(**full_R)[0].grad_fn).__name__ != "_FusedStepBackward"
+
+
+@pytest.mark.parametrize("used", ["all", "z", "P", "K"])
+def test_fused_step_matches_composed_values_and_gradients(used):
+    args = {k: v.requires_grad_() for k, v in _batched_args().items()}
+    fused, composed = kalman_step(**args), _composed(**args)
+    assert type(fused[0].grad_fn).__name__ == "_FusedStepBackward"
+    for a, b in zip(fused, composed):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-12)
+    g = torch.Generator().manual_seed(1)
+    upstream = [torch.randn(o.shape, generator=g, dtype=o.dtype) for o in fused]
+    pick = {"all": (0, 1, 2), "z": (0,), "P": (1,), "K": (2,)}[used]
+    grads = [torch.autograd.grad([out[i] for i in pick], list(args.values()), [upstream[i] for i in pick],
+                                 allow_unused=True) for out in (fused, composed)]
+    for name, a, b in zip(args, *grads):
+        if b is None:  # P, K do not depend on z and w
+            assert a is None or torch.count_nonzero(a) == 0, name
+        else:
+            torch.testing.assert_close(a, b, rtol=0, atol=1e-11, msg=name)
+
+
+def test_gradcheck_fused_step_with_unsymmetric_P():
+    # the gradient is that of the function on any P (it enters through F P F^T, then symmetrised)
+    args = _batched_args(b=2, n=3, seed=2)
+    args["P"] = args["P"] + 0.05 * torch.randn(2, 3, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(3))
+    leaves = tuple(v.requires_grad_() for v in args.values())
+    assert torch.autograd.gradcheck(kalman_step, leaves)
+
+
+def test_fused_step_matches_composed_over_a_float32_drf_sized_run():
+    g = torch.Generator().manual_seed(7)
+    b, n, T = 50, 30, 75
+    w = torch.randn(T, b, n, generator=g)
+    r = torch.pow(10.0, torch.empty(T, b, n).uniform_(-2, 1, generator=g))
+    F = torch.eye(n) + 0.05 * torch.randn(T, b, n, n, generator=g)
+    q = 0.01 + 0.1 * torch.rand(T, b, n, generator=g)
+    runs = []
+    for step in (kalman_step, _composed):
+        z, P = w[0], torch.diag_embed(r[0])
+        for t in range(1, T):
+            z, P, K = step(z, P, F[t], q[t], w[t], r[t])
+        runs.append((z, P, K))
+    for a, b_ in zip(*runs):
+        torch.testing.assert_close(a, b_, rtol=1e-4, atol=1e-5)
+
+
+def test_fused_step_singular_S_gets_jitter_and_nan_raises():
+    P = torch.tensor([[[1.0, 1.0], [1.0, 1.0]]], dtype=torch.float64)
+    F, z, w, R = torch.eye(2, dtype=torch.float64).expand(1, 2, 2), torch.zeros(1, 2, dtype=torch.float64), \
+        torch.ones(1, 2, dtype=torch.float64), torch.zeros(1, 2, dtype=torch.float64)
+    zn, Pn, K = kalman_step(z, P, F, R, w, R)
+    assert torch.isfinite(zn).all() and torch.isfinite(Pn).all() and torch.isfinite(K).all()
+    with pytest.raises(ValueError, match="NaN or inf"):
+        kalman_step(z, torch.full((1, 2, 2), float("nan"), dtype=torch.float64), F, R, w, R)

@@ -166,7 +166,7 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     monkeypatch.setattr(studies, "pedestrian_data", fake_data)
     P = SimpleNamespace(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
-                        gating_sweep_points=3, interval_level=0.95)
+                        gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95)
     out = gating.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
                               min_run_time=0.001)
     assert served == [("val", 0.05), ("test", 0.05)]
@@ -266,6 +266,65 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
     kg = sweep[sweep["method"] == "kalman_gain"].set_index("val_fraction")["fraction"]
     rnd = sweep[sweep["method"] == "random"].set_index("val_fraction")["fraction"]
     assert (kg == rnd).all()
+
+
+def test_timing_subset_is_evenly_spaced_fixed_and_checked():
+    lengths = torch.full((10,), 5)
+    assert gating.timing_subset(lengths, 0).tolist() == list(range(10))
+    assert gating.timing_subset(lengths, 50).tolist() == list(range(10))
+    idx = gating.timing_subset(torch.full((1000,), 75), 7500)  # the paper's pendulum: 100 sequences
+    assert idx.numel() == 100 and idx[0] == 0 and idx[-1] == 999 and bool((idx.diff() > 0).all())
+    assert torch.equal(idx, gating.timing_subset(torch.full((1000,), 75), 7500))
+    assert gating.timing_subset(torch.tensor([1, 2, 3, 4]), 5).numel() == 2  # ceil(4 * 5 / 10)
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="gating_timing_frames"):
+            gating.timing_subset(lengths, bad)
+
+
+def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(monkeypatch):
+    model, val, test = tiny_drf(), keypoint_data(seed=1), keypoint_data(seed=2)
+    gate, _ = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
+    thresholds = gating.sweep_thresholds(gate)
+    full = gating.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                                thresholds=thresholds)
+    idx = gating.timing_subset(test.mask.sum(dim=1), 12)  # ceil(6 * 12 / 27) = 3: sequences 0, 2, 5
+    assert idx.tolist() == [0, 2, 5]
+    subset_mask = test.mask[idx]
+    feature_batches, stage_calls = [], []
+    real_features, real_stage = model.features, gating.uncertainty_stage
+
+    def features(x, return_gains=False):
+        feature_batches.append(x.shape[0])
+        return real_features(x, return_gains=return_gains)
+
+    def stage_(model_, h, gains, mask, setting, **kw):
+        stage_calls.append((h.shape[0], setting, kw.get("threshold"), kw.get("n_random"), mask.clone()))
+        return real_stage(model_, h, gains, mask, setting, **kw)
+
+    monkeypatch.setattr(model, "features", features)
+    monkeypatch.setattr(gating, "uncertainty_stage", stage_)
+    sub = gating.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                               thresholds=thresholds, timing_frames=12)
+    # metrics: one pass over all B sequences, identical to the untimed-subset run
+    metrics = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae"]
+    assert sub[metrics].equals(full[metrics])
+    assert (sub["frames"] == int(test.mask.sum())).all()
+    assert (sub["timed_frames"] == int(subset_mask.sum())).all() and sub["timed_frames"].iloc[0] < sub["frames"].iloc[0]
+    assert feature_batches[0] == B and set(feature_batches[1:]) == {3}
+    n_full_stage = len(full)
+    assert {c[0] for c in stage_calls[:n_full_stage]} == {B} and {c[0] for c in stage_calls[n_full_stage:]} == {3}
+    # on the subset a random twin draws as many frames as its Kalman-gain gate selects there
+    _, gains_sub = real_features(test.inputs[idx], return_gains=True)
+    for _, setting, _, n_random, mask in stage_calls[n_full_stage:]:
+        assert torch.equal(mask, subset_mask)
+        if setting == "random":
+            assert 0 <= n_random <= int(subset_mask.sum())
+    timed_kg = {thr for b, s, thr, _, _ in stage_calls[n_full_stage:] if s == "kalman_gain"}
+    timed_counts = {int(gating.Gate(**{**gate.__dict__, "threshold": thr}).select(gains_sub, subset_mask).sum())
+                    for thr in timed_kg}
+    timed_random = {n for b, s, _, n, _ in stage_calls[n_full_stage:] if s == "random"}
+    assert timed_random == timed_counts
+    assert (sub["time_ms"] > 0).all() and np.allclose(sub["batch_ms"], sub["time_ms"] * sub["timed_frames"])
 
 
 def test_selected_fraction_of_never_and_always_gates():
