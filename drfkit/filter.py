@@ -22,10 +22,13 @@ one diagonal Q of shape (n,) across a batch, pass it as is; to share a full one,
 
 P and full R/Q must be symmetric positive (semi-)definite; every P this module returns
 is symmetrised ``(P + P^T) / 2``. Everything works in float32 and float64, on any device,
-and is differentiable in every argument (first derivatives: the gain has a hand-written
-backward, see ``_TransposedGain``; double backward is not supported).
+and is differentiable in every argument (first derivatives: the gain, and the whole fused
+step, have hand-written backwards, see ``_TransposedGain`` and ``_FusedStep``; double
+backward is not supported).
 
-Numerics: K is obtained from a Cholesky factor of S (never an explicit inverse), and
+Numerics: K is obtained from a Cholesky factor of S, by triangular solves in the
+composed functions and by the inverse of the factor (``cholesky_inverse``) in the fused
+step that ``kalman_step`` uses for the DRF's batched diagonal case (see ``_FusedStep``);
 the Joseph form keeps P positive definite even when K carries rounding error (the
 error enters P only to second order); the short form P - K P loses definiteness in
 float32 when the noise scales span many decades. If the Cholesky factorisation of S
@@ -273,11 +276,14 @@ class _FusedStep(torch.autograd.Function):
     autograd node with a hand-derived backward. Shapes: z, q, w, r (B, n); P, F (B, n, n).
 
     The same equations and Joseph form as the composed functions, with one difference:
-    K^T = S^-1 P- through ``cholesky_inverse`` of the Cholesky factor (one LAPACK call and
-    a matmul) instead of ``cholesky_solve`` (two triangular solves per item, about 3x
-    slower for a batch of 30 x 30 on CPU). S^-1 is kept for the backward, whose solve then
-    is a matmul too. On a batch of SPD 30 x 30 matrices the results agree with the composed
-    path to rounding (tests/test_filter.py checks values and gradients in float64).
+    S^-1 from ``cholesky_inverse`` of the Cholesky factor (one LAPACK call per item) instead
+    of ``cholesky_solve`` (two triangular solves per item, about 3x slower for a batch of
+    30 x 30 on CPU), and then K = I - R S^-1 (exact for H = I, as S - R = P-): a row scaling,
+    not a matmul. K's absolute error stays at rounding level; where K is tiny its relative
+    error grows, which the Joseph form tolerates (K's error enters P at second order). S^-1
+    is kept for the backward, whose solve then is a matmul too. Values and gradients agree
+    with the composed path to rounding (tests/test_filter.py, float64 and a float32 run of
+    the DRF's size).
 
     Backward (G = sym(dL/dP_new), M = I - K, all products batched; P-, G, H symmetric):
         J = M P- M^T + K R K^T:   dL/dM = 2 G M P-,  dL/dP- = M^T G M,
@@ -298,44 +304,52 @@ class _FusedStep(torch.autograd.Function):
         S = P_pred.clone()
         S.diagonal(dim1=-2, dim2=-1).add_(r)
         S_inv = torch.cholesky_inverse(_safe_cholesky(S))
-        K = P_pred @ S_inv
+        # K = P- S^-1 = (S - R) S^-1 = I - R S^-1: a row scaling of S^-1 instead of a matmul
+        I_minus_K = S_inv * r.unsqueeze(-1)
+        K = -I_minus_K
+        K.diagonal(dim1=-2, dim2=-1).add_(1.0)
         innovation = w - z_pred
         z_new = z_pred + _bmv(K, innovation)
-        I_minus_K = -K
-        I_minus_K.diagonal(dim1=-2, dim2=-1).add_(1.0)
         P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
         ctx.save_for_backward(z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
         ctx.set_materialize_grads(False)
+        ctx.P_symmetric = bool(ctx.needs_input_grad[2]) and torch.equal(P, P.mT)
         return z_new, _symmetrise(P_new), K
 
     @staticmethod
     @once_differentiable
-    def backward(ctx, g_z, g_P, g_K):
+    def backward(ctx, g_z, g_P, g_K_out):
         z, P, F, r, P_pred, S_inv, K, M, innovation = ctx.saved_tensors
-        # dL/dK and dL/dr through the Joseph update and the mean update
-        g_K = torch.zeros_like(K) if g_K is None else g_K.clone()
+        # dL/dK and dL/dr through the Joseph update, then the mean update
+        g_K = g_K_out
         g_r = GM = None
         if g_P is not None:
-            G = _symmetrise(g_P.clone())
+            G = _symmetrise(g_P)
             GM = G @ M
-            GK = G.sub_(GM)  # G K = G (I - M); G is not needed any more
+            GK = G.sub_(GM)  # G K = G (I - M); G itself is not needed any more
             g_r = (GK * K).sum(-2)
-            g_K.addcmul_(GK, r.unsqueeze(-2), value=2.0).baddbmm_(GM, P_pred, alpha=-2.0)
+            g_K_joseph = torch.baddbmm(GK * (2.0 * r).unsqueeze(-2), GM, P_pred, alpha=-2.0)
+            g_K = g_K_joseph if g_K is None else g_K_joseph.add_(g_K)
         g_zp = g_w = None
         if g_z is not None:
-            g_K.addcmul_(g_z.unsqueeze(-1), innovation.unsqueeze(-2))
+            outer = g_z.unsqueeze(-1) * innovation.unsqueeze(-2)
+            g_K = outer if g_K is None else outer.add_(g_K)
             g_w = _bmv(K.mT, g_z)
             g_zp = g_z - g_w
-        # through K = P- S^-1: Y = S^-1 (dL/dK)^T; dL/dP- = M^T G M + Y + dL/dS with dL/dS = -Y K,
-        # and Y - Y K = Y M
+        if g_K is None:
+            g_K = torch.zeros_like(K)
+        # through K = P- S^-1: Y = S^-1 (dL/dK)^T, dL/dS = -Y K, dL/dP- = M^T G M + Y + dL/dS
+        # = M^T G M + Y M (as K = I - M), and diag(dL/dS) = diag(Y M) - diag(Y)
         Y = S_inv @ g_K.mT
-        g_S_diag = -(Y * K.mT).sum(-1)
+        YM = Y @ M
+        g_S_diag = YM.diagonal(dim1=-2, dim2=-1) - Y.diagonal(dim1=-2, dim2=-1)
         g_r = g_S_diag if g_r is None else g_r.add_(g_S_diag)
-        g_Pp = Y @ M if GM is None else torch.baddbmm(Y @ M, M.mT, GM)
+        g_Pp = YM if GM is None else YM.baddbmm_(M.mT, GM)
         H = _symmetrise(g_Pp)
         g_q = H.diagonal(dim1=-2, dim2=-1).clone()
         HF = H @ F
-        g_F = HF @ (P + P.mT)
+        # dL/dF = H F (P + P^T); P is symmetric whenever it came out of a filter step
+        g_F = (HF @ P).mul_(2.0) if ctx.P_symmetric else HF @ (P + P.mT)
         g_Pin = F.mT @ HF
         g_zin = None
         if g_zp is not None:
@@ -351,7 +365,7 @@ def kalman_step(z: torch.Tensor, P: torch.Tensor, F: torch.Tensor, Q: torch.Tens
 
     Batched arguments with diagonal noise (z, Q, w, R (B, n); P, F (B, n, n); the DRF's
     case) take a fused path with a hand-written backward (``_FusedStep``), about twice as
-    fast; everything else (broadcasting, full noise, other batch shapes) the composed one.
+    fast on CPU; everything else (broadcasting, full noise, other batch shapes) the composed one.
     Returns z_new (..., n), P_new (..., n, n), K (..., n, n).
     """
     if _batched_diagonal(z, P, F, Q, w, R):

@@ -313,8 +313,9 @@ def test_float32_backward_runs(shared_F):
 def _batched_args(b=4, n=5, dtype=torch.float64, seed=0):
     g = torch.Generator().manual_seed(seed)
     A = torch.randn(b, n, n, generator=g, dtype=dtype)
+    P = A @ A.mT / n + 0.3 * torch.eye(n, dtype=dtype)
     return dict(z=torch.randn(b, n, generator=g, dtype=dtype),
-                P=A @ A.mT / n + 0.3 * torch.eye(n, dtype=dtype),
+                P=(P + P.mT) / 2,  # exactly symmetric, as a filter step returns it
                 F=torch.eye(n, dtype=dtype) + 0.2 * torch.randn(b, n, n, generator=g, dtype=dtype),
                 Q=torch.rand(b, n, generator=g, dtype=dtype) + 0.05,
                 w=torch.randn(b, n, generator=g, dtype=dtype),
@@ -338,6 +339,7 @@ def test_fused_path_is_taken_only_for_batched_diagonal_arguments():
 @pytest.mark.parametrize("used", ["all", "z", "P", "K"])
 def test_fused_step_matches_composed_values_and_gradients(used):
     args = {k: v.requires_grad_() for k, v in _batched_args().items()}
+    assert torch.equal(args["P"], args["P"].mT)  # the backward's symmetric-P branch (unsymmetric: gradcheck below)
     fused, composed = kalman_step(**args), _composed(**args)
     assert type(fused[0].grad_fn).__name__ == "_FusedStepBackward"
     for a, b in zip(fused, composed):
@@ -387,3 +389,35 @@ def test_fused_step_singular_S_gets_jitter_and_nan_raises():
     assert torch.isfinite(zn).all() and torch.isfinite(Pn).all() and torch.isfinite(K).all()
     with pytest.raises(ValueError, match="NaN or inf"):
         kalman_step(z, torch.full((1, 2, 2), float("nan"), dtype=torch.float64), F, R, w, R)
+
+
+def test_fused_step_keeps_the_committed_paper_drf_predictions():
+    # The paper's pendulum DRF was trained and evaluated with the composed step; the fused one
+    # must give the same predictions (to float32 rounding) from its committed checkpoint.
+    from pathlib import Path
+
+    import drfkit.filter as filter_module
+    from drfkit import load_checkpoint
+    from drfkit.data.pendulum import generate_pendulum
+
+    paths = sorted(Path(__file__).resolve().parents[1].glob("results/paper/models/pendulum-drf-seed0-*-best.pt"))
+    assert paths, "the committed paper checkpoint results/paper/models/pendulum-drf-seed0-*-best.pt is missing"
+    model = load_checkpoint(paths[0]).eval()
+    images = torch.as_tensor(generate_pendulum(4, 75, 0.75, seed=11)["images"])
+    original, fused_steps = filter_module._batched_diagonal, []
+
+    def recorded(*args):
+        fused_steps.append(original(*args))
+        return fused_steps[-1]
+
+    with torch.no_grad():
+        try:
+            filter_module._batched_diagonal = recorded
+            fused = model(images)
+            filter_module._batched_diagonal = lambda *args: False  # force the composed path
+            composed = model(images)
+        finally:
+            filter_module._batched_diagonal = original
+    assert len(fused_steps) == 74 and all(fused_steps)
+    torch.testing.assert_close(fused[0], composed[0], rtol=0, atol=1e-5)
+    torch.testing.assert_close(fused[1], composed[1], rtol=1e-4, atol=1e-6)
