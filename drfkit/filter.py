@@ -313,7 +313,6 @@ class _FusedStep(torch.autograd.Function):
         P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
         ctx.save_for_backward(z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
         ctx.set_materialize_grads(False)
-        ctx.P_symmetric = bool(ctx.needs_input_grad[2]) and torch.equal(P, P.mT)
         return z_new, _symmetrise(P_new), K
 
     @staticmethod
@@ -348,8 +347,7 @@ class _FusedStep(torch.autograd.Function):
         H = _symmetrise(g_Pp)
         g_q = H.diagonal(dim1=-2, dim2=-1).clone()
         HF = H @ F
-        # dL/dF = H F (P + P^T); P is symmetric whenever it came out of a filter step
-        g_F = (HF @ P).mul_(2.0) if ctx.P_symmetric else HF @ (P + P.mT)
+        g_F = HF @ (P + P.mT)
         g_Pin = F.mT @ HF
         g_zin = None
         if g_zp is not None:

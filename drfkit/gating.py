@@ -38,7 +38,6 @@ of frames as the Kalman-gain gate selects on test, drawn uniformly, seeded),
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -48,6 +47,7 @@ import torch
 
 from drfkit.evaluate import prediction_metrics
 from drfkit.models.parts import check_dropout_p, check_n_samples
+from drfkit.timing import interleaved_times
 from drfkit.uncertainty import as_model_input, summarise_samples
 
 SETTINGS = ("no_dropout", "random", "kalman_gain", "always")
@@ -287,43 +287,15 @@ def timing_subset(frames_per_sequence: torch.Tensor, max_frames: int) -> torch.T
     return torch.linspace(0, n - 1, k, dtype=torch.float64).round().long()
 
 
-def _sync(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
 def measure_interleaved(fns: dict[str, Callable[[], Any]], min_run_time: float, device: torch.device,
                         block_s: float = 0.01, min_rounds: int = 5) -> dict[str, float]:
-    """Median seconds per call of each fn, measured in interleaved rounds (time.perf_counter).
-
-    Each round times one block of calls (about ``block_s`` seconds, at least one call) of every
-    fn in turn, the order rotated per round, so a slow spell of a shared machine hits every
-    setting alike. At least ``min_rounds`` rounds, and about ``min_run_time`` seconds per fn.
-    """
-    names = list(fns)
-    reps, block = {}, {}
+    """Median seconds per call of each fn over interleaved rounds (``timing.interleaved_times``:
+    blocks of about ``block_s`` seconds, the order rotated per round, at least ``min_rounds``
+    rounds and about ``min_run_time`` seconds per fn), so a slow spell of a shared machine hits
+    every setting alike."""
     with torch.no_grad():
-        for name in names:  # warm-up, and how many calls make a block
-            fns[name]()
-            _sync(device)
-            start = time.perf_counter()
-            fns[name]()
-            _sync(device)
-            once = max(time.perf_counter() - start, 1e-7)
-            reps[name] = max(1, int(block_s / once))
-            block[name] = reps[name] * once
-        per_call: dict[str, list[float]] = {n: [] for n in names}
-        rounds = max(min_rounds, math.ceil(min_run_time / float(np.median(list(block.values())))))
-        for r in range(rounds):
-            for name in names[r % len(names):] + names[:r % len(names)]:
-                fn, n = fns[name], reps[name]
-                _sync(device)
-                start = time.perf_counter()
-                for _ in range(n):
-                    fn()
-                _sync(device)
-                per_call[name].append((time.perf_counter() - start) / n)
-    return {n: float(np.median(v)) for n, v in per_call.items()}
+        per_round = interleaved_times(fns, min_run_time, device, block_s=block_s, min_rounds=min_rounds)
+    return {n: float(np.median(v)) for n, v in per_round.items()}
 
 
 # --------------------------------------------------------------------------- fit on validation

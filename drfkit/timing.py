@@ -4,7 +4,9 @@ between measurements of the same run.
 Two studies:
 
 ``training_step_times`` measures one optimisation step (forward, loss, backward) of
-each model on the same batch, from which seconds per epoch follow.
+each model on the same batch, from which seconds per epoch follow. The models are timed
+in interleaved rounds (``interleaved_times``), and a ratio is the median of the per-round
+ratios: a slow spell of a shared machine then hits both sides of a ratio alike.
 
 ``inference_benchmark`` measures the cost of a prediction *with uncertainty* for one new
 frame per pedestrian (or pendulum), after keypoint extraction -- the paper's Table
@@ -110,18 +112,64 @@ def _measure(fn, min_run_time: float, label: str, sub_label: str, threads: int,
     return timer.blocked_autorange(min_run_time=min_run_time)
 
 
+def _sync(device: torch.device | None) -> None:
+    if device is not None and device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, device: torch.device | None = None,
+                      block_s: float = 0.01, min_rounds: int = 5) -> dict[str, list[float]]:
+    """Seconds per call of each fn, one value per round, measured in interleaved rounds.
+
+    Each round times one block of calls (about ``block_s`` seconds, at least one call) of
+    every fn in turn, the order rotated per round, so a slow spell of a shared machine hits
+    every fn alike; per-round values of two fns can be divided to get a ratio in which such
+    spells cancel. At least ``min_rounds`` rounds, and about ``min_run_time`` seconds per fn.
+    One warm-up call each. The clock is ``torch.utils.benchmark``'s; CUDA is synchronised
+    around each block when ``device`` is a GPU.
+    """
+    names = list(fns)
+    if not names:
+        raise ValueError("fns is empty: give at least one function to time")
+    reps, block = {}, {}
+    for name in names:  # warm-up, and how many calls make a block
+        fns[name]()
+        _sync(device)
+        start = synchronised_clock()
+        fns[name]()
+        _sync(device)
+        once = max(synchronised_clock() - start, 1e-7)
+        reps[name] = max(1, int(block_s / once))
+        block[name] = reps[name] * once
+    per_call: dict[str, list[float]] = {n: [] for n in names}
+    rounds = max(min_rounds, math.ceil(min_run_time / float(np.median(list(block.values())))))
+    for r in range(rounds):
+        for name in names[r % len(names):] + names[:r % len(names)]:
+            fn, n = fns[name], reps[name]
+            _sync(device)
+            start = synchronised_clock()
+            for _ in range(n):
+                fn()
+            _sync(device)
+            per_call[name].append((synchronised_clock() - start) / n)
+    return per_call
+
+
 def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor, targets: torch.Tensor,
                         n_batches_per_epoch: int, min_run_time: float = 1.0,
-                        threads: int | None = None, seed: int = 0) -> pd.DataFrame:
+                        threads: int | None = None, seed: int = 0, min_rounds: int = 5) -> pd.DataFrame:
     """Median seconds of one training step per model, and the implied seconds per epoch.
 
     configs: name -> model config; inputs (B, T, ...) and targets (B, T, out): one batch.
-    Returns columns model, step_median_s, step_iqr_s, epoch_s, ratio_to_<first model>.
+    The models are timed in interleaved rounds (``interleaved_times``, about ``min_run_time``
+    seconds each, at ``threads``). Returns columns model, batch, frames, threads, rounds,
+    step_median_s, step_iqr_s (over rounds), epoch_s, and ratio_to_<first model>: the median
+    over rounds of this model's step time over the first model's in the same round.
     """
     from drfkit.models import build_model
 
     threads = threads or torch.get_num_threads()
-    rows = []
+    steps = {}
     for name, config in configs.items():
         torch.manual_seed(seed)
         model = build_model(config).train()
@@ -130,17 +178,25 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
         def step(model=model, params=params):
             mean, sigma = model(inputs)
             loss = model.loss(mean, sigma, targets, None)
-            grads = torch.autograd.grad(loss, params, allow_unused=True)
-            return grads
+            return torch.autograd.grad(loss, params, allow_unused=True)
 
-        m = _measure(step, min_run_time, "training step", name, threads)
+        steps[name] = step
+    previous = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        times = interleaved_times(steps, min_run_time, inputs.device, block_s=0.0, min_rounds=min_rounds)
+    finally:
+        torch.set_num_threads(previous)
+    base = next(iter(configs))
+    rows = []
+    for name, per_round in times.items():
+        t = np.asarray(per_round)
+        q1, q3 = np.quantile(t, [0.25, 0.75])
         rows.append({"model": name, "batch": int(inputs.shape[0]), "frames": int(inputs.shape[1]),
-                     "threads": threads, "step_median_s": m.median, "step_iqr_s": m.iqr,
-                     "epoch_s": m.median * n_batches_per_epoch})
-    frame = pd.DataFrame(rows)
-    base = frame["epoch_s"].iloc[0]
-    frame[f"ratio_to_{frame['model'].iloc[0]}"] = frame["epoch_s"] / base
-    return frame
+                     "threads": threads, "rounds": len(t), "step_median_s": float(np.median(t)),
+                     "step_iqr_s": float(q3 - q1), "epoch_s": float(np.median(t)) * n_batches_per_epoch,
+                     f"ratio_to_{base}": float(np.median(t / np.asarray(times[base])))})
+    return pd.DataFrame(rows)
 
 
 # ------------------------------------------------------------------ one streaming step

@@ -339,7 +339,6 @@ def test_fused_path_is_taken_only_for_batched_diagonal_arguments():
 @pytest.mark.parametrize("used", ["all", "z", "P", "K"])
 def test_fused_step_matches_composed_values_and_gradients(used):
     args = {k: v.requires_grad_() for k, v in _batched_args().items()}
-    assert torch.equal(args["P"], args["P"].mT)  # the backward's symmetric-P branch (unsymmetric: gradcheck below)
     fused, composed = kalman_step(**args), _composed(**args)
     assert type(fused[0].grad_fn).__name__ == "_FusedStepBackward"
     for a, b in zip(fused, composed):

@@ -197,3 +197,32 @@ def test_training_step_times_still_reports_epochs():
     assert speed["model"].tolist() == ["no_dynamics", "drf"]
     np.testing.assert_allclose(speed["epoch_s"], 4 * speed["step_median_s"])
     assert speed["ratio_to_no_dynamics"].iloc[0] == 1.0 and (speed["step_median_s"] > 0).all()
+
+
+def test_interleaved_times_rotates_the_order_and_times_every_fn_each_round():
+    import time as _time
+
+    calls = []
+    fns = {name: (lambda name=name: calls.append(name) or (_time.sleep(0.002) if name == "slow" else None))
+           for name in ("fast", "slow", "mid")}
+    out = timing.interleaved_times(fns, min_run_time=0.0, block_s=0.0, min_rounds=4)
+    assert {k: len(v) for k, v in out.items()} == {"fast": 4, "slow": 4, "mid": 4}
+    measured = calls[6:]  # after two warm-up calls each
+    assert measured == ["fast", "slow", "mid", "slow", "mid", "fast", "mid", "fast", "slow", "fast", "slow", "mid"]
+    assert min(out["slow"]) > 0.0015 and max(out["fast"]) < min(out["slow"])
+    with pytest.raises(ValueError, match="empty"):
+        timing.interleaved_times({}, min_run_time=0.1)
+
+
+def test_training_step_ratio_is_the_median_of_per_round_ratios(monkeypatch):
+    from drfkit.models import default_config
+
+    # per-round ratios 5, 1, 1, 3, 2 (median 2); the ratio of the medians would be 5 / 3
+    fake = {"no_dynamics": [1.0, 2.0, 3.0, 4.0, 5.0], "drf": [5.0, 2.0, 3.0, 12.0, 10.0]}
+    monkeypatch.setattr(timing, "interleaved_times", lambda fns, *a, **k: {n: fake[n] for n in fns})
+    configs = {k: default_config(k, "keypoints", 1) for k in ("no_dynamics", "drf")}
+    speed = timing.training_step_times(configs, example_frames("pedestrians", 2, 3), torch.rand(2, 3, 1) + 5.0,
+                                       n_batches_per_epoch=2, min_run_time=0.01, threads=1)
+    row = speed.set_index("model").loc["drf"]
+    assert row["ratio_to_no_dynamics"] == 2.0 and row["step_median_s"] == 5.0 and row["rounds"] == 5
+    assert row["epoch_s"] == 10.0 and row["step_iqr_s"] == pytest.approx(10.0 - 3.0)

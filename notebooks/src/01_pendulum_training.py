@@ -111,8 +111,10 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # %% [markdown]
 # ## Speed of training
 # One optimisation step (forward, loss, backward) of each model on the same batch of 50 × T frames,
-# measured with `torch.utils.benchmark` in one run; seconds per epoch follow from the number of
-# batches. The target is a DRF epoch at most 1.5× a no_dynamics epoch.
+# measured in one run in interleaved rounds (`drfkit.timing.training_step_times`: each round times
+# every model in turn, so a slow spell of the machine hits all of them); seconds per epoch follow
+# from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios.
+# The target is a DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count.
 
 # %%
 # NBVAL_IGNORE_OUTPUT

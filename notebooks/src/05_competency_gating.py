@@ -34,10 +34,10 @@
 #
 # **Gated inference is real.** The features (encoder and filter) run once; the head runs with
 # `n_samples` dropout samples on the gathered selected frames and once on the rest; results are
-# scattered back. Times are measured with `time.perf_counter` in interleaved rounds (medians) on
-# one batch of evenly spaced test sequences holding about `gating_timing_frames` real frames (the
-# `timed_frames` column; 0 = all), in the same run, per real frame; PICP, MPIW and NLL always use
-# every test sequence.
+# scattered back. Times are measured with `torch.utils.benchmark`'s clock in interleaved rounds
+# (medians; `drfkit.timing.interleaved_times`), in the same run, per real frame, on one batch of
+# evenly spaced test sequences holding about `gating_timing_frames` real frames (the
+# `timed_frames` column; 0 = all); PICP, MPIW and NLL always use every test sequence.
 # Per-frame times of a batch this large do not depend on its size, and timing every setting and
 # threshold on all 75,000 pendulum test frames would take about an hour on 2 cores. On the timed
 # batch, a random twin draws as many frames as its Kalman-gain gate selects there. `head_ms` is the uncertainty stage alone
