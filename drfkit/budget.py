@@ -40,26 +40,44 @@ def epochs_done(P, study: str, kind: str) -> tuple[int, int]:
     return done, left
 
 
+RATIO_BASE = "no_dynamics"  # the denominator of step_ratio (issue #4: a DRF epoch <= 1.5x a no_dynamics one)
+
+
 def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
-    """One row per (study, model): step time, batches per epoch, epochs, seeds, hours."""
+    """One row per (study, model): step time, batches per epoch, epochs, seeds, hours.
+
+    Models that train on the same batches (same single-frame flag and batch size) are timed
+    together in interleaved rounds (``timing.training_step_times``), so ``step_ratio``, a
+    model's step over ``ratio_to``'s (no_dynamics where it is in the group) as the median of
+    per-round ratios, is measured in one run and robust to a slow spell of the machine.
+    """
     rows = []
     for study in ("pendulum", "pedestrians"):
         train = studies.study_data(P, study, "train")
+        groups: dict[tuple[bool, int], list[str]] = {}
         for kind in studies.study_models(P, study):
             cfg = studies.train_config(P, study, kind, P.seeds[0])
-            data = train.frames() if cfg.framewise else train
-            batch = min(cfg.batch_size, len(data))
-            step = training_step_times({kind: studies.model_config(study, kind, P)}, data.inputs[:batch],
+            groups.setdefault((cfg.framewise, cfg.batch_size), []).append(kind)
+        for (framewise, batch_size), kinds in groups.items():
+            kinds = sorted(kinds, key=lambda k: k != RATIO_BASE)  # the base first: it is the denominator
+            data = train.frames() if framewise else train
+            batch = min(batch_size, len(data))
+            step = training_step_times({k: studies.model_config(study, k, P) for k in kinds}, data.inputs[:batch],
                                        data.targets[:batch], n_batches_per_epoch=1, min_run_time=min_run_time)
-            step_s = float(step["step_median_s"].iloc[0])
-            batches = int(np.ceil(len(data) / cfg.batch_size))
-            hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600
-            done, left = epochs_done(P, study, kind)
-            rows.append({"study": study, "model": kind, "batch": batch, "frames_per_item": int(data.inputs.shape[1]),
-                         "step_s": step_s, "batches_per_epoch": batches, "epoch_s": step_s * batches,
-                         "epochs": cfg.epochs, "seeds": len(P.seeds), "hours": hours, "epochs_done": done,
-                         "hours_left": hours * left / (cfg.epochs * len(P.seeds)),
-                         "threads": torch.get_num_threads()})
+            ratio = f"ratio_to_{kinds[0]}"
+            for kind, s in zip(kinds, step.itertuples()):
+                cfg = studies.train_config(P, study, kind, P.seeds[0])
+                step_s = float(s.step_median_s)
+                batches = int(np.ceil(len(data) / cfg.batch_size))
+                hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600
+                done, left = epochs_done(P, study, kind)
+                rows.append({"study": study, "model": kind, "batch": batch,
+                             "frames_per_item": int(data.inputs.shape[1]), "step_s": step_s,
+                             "step_ratio": float(getattr(s, ratio)), "ratio_to": kinds[0], "rounds": int(s.rounds),
+                             "batches_per_epoch": batches, "epoch_s": step_s * batches, "epochs": cfg.epochs,
+                             "seeds": len(P.seeds), "hours": hours, "epochs_done": done,
+                             "hours_left": hours * left / (cfg.epochs * len(P.seeds)),
+                             "threads": torch.get_num_threads()})
     return pd.DataFrame(rows)
 
 

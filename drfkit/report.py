@@ -169,15 +169,29 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
         b = pd.read_csv(budget)
         if "hours_left" not in b:  # written before the column existed
             b["epochs_done"], b["hours_left"] = 0, b["hours"]
+        if "step_ratio" not in b:  # written before models were timed together
+            b["step_ratio"], b["ratio_to"] = np.nan, ""
         lines += [f"Training cost of this profile on this machine, measured by `python -m drfkit.budget --profile "
                   f"{profile}` (one training step per model, scaled by batches, epochs and seeds, "
-                  f"{int(b['threads'].iloc[0])} torch thread(s)): **{b['hours'].sum():.1f} hours** in all, "
+                  f"{int(b['threads'].iloc[0])} torch thread(s); models sharing batches timed in interleaved rounds, "
+                  f"the step ratio is the median of per-round ratios): **{b['hours'].sum():.1f} hours** in all, "
                   f"**{b['hours_left'].sum():.1f} hours left** after the epochs already in `results/{profile}/models/`.",
-                  "", "| study | model | s / epoch | epochs × seeds | epochs done | hours | hours left |",
-                  "|---|---|---|---|---|---|---|"]
-        lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | {r.epochs} × {r.seeds} | {r.epochs_done} | "
-                  f"{r.hours:.2f} | {r.hours_left:.2f} |" for r in b.itertuples()]
+                  "", "| study | model | s / epoch | step ratio | epochs × seeds | epochs done | hours | hours left |",
+                  "|---|---|---|---|---|---|---|---|"]
+        lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | "
+                  + (f"{r.step_ratio:.2f}× {r.ratio_to}" if pd.notna(r.step_ratio) else "") + " | "
+                  f"{r.epochs} × {r.seeds} | {r.epochs_done} | {r.hours:.2f} | {r.hours_left:.2f} |"
+                  for r in b.itertuples()]
         lines.append("")
+    speed = root / "tables" / "pendulum_training_speed.csv"
+    if speed.exists():
+        sp = pd.read_csv(speed).set_index("model")
+        if {"drf", "no_dynamics"} <= set(sp.index) and "ratio_to_no_dynamics" in sp:
+            lines += [f"Pendulum training speed in notebook 01 (one run, {int(sp['threads'].iloc[0])} torch "
+                      f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
+                      f"costs **{sp.loc['drf', 'ratio_to_no_dynamics']:.2f}×** a no_dynamics step "
+                      f"({sp.loc['drf', 'step_median_s']:.3g} s against {sp.loc['no_dynamics', 'step_median_s']:.3g} s; "
+                      f"target ≤ 1.5×; `tables/pendulum_training_speed.csv`).", ""]
     if link_figures:
         for name, caption in HEADLINE_FIGURES:
             png = root / "figures" / f"{name}.png"

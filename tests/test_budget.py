@@ -18,10 +18,14 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
     table = pd.read_csv(tmp_path / "tiny" / "training_budget.csv")
     assert set(zip(table["study"], table["model"])) == (
         {("pendulum", m) for m in values["pend_models"]} | {("pedestrians", m) for m in values["ped_models"]})
-    pend = table[table["study"] == "pendulum"].iloc[0]
+    pend = table[(table["study"] == "pendulum") & (table["model"] == "drf")].iloc[0]
     assert pend["batches_per_epoch"] == 1 and pend["epochs"] == 3 and pend["seeds"] == 3
     assert pend["hours"] == pytest.approx(pend["step_s"] * 1 * 3 * 3 / 3600, rel=1e-4)  # CSV keeps 6 digits
+    pend_rows = table[table["study"] == "pendulum"].set_index("model")
+    assert (pend_rows["ratio_to"] == "no_dynamics").all() and pend_rows.loc["no_dynamics", "step_ratio"] == 1.0
+    assert (pend_rows["rounds"] >= 5).all() and (pend_rows["step_ratio"] > 0).all()
     mono = table[table["model"] == "monoloco"].iloc[0]
+    assert mono["ratio_to"] == "monoloco" and mono["step_ratio"] == 1.0  # timed alone (single frames)
     assert mono["frames_per_item"] == 1 and mono["epochs"] == values["monoloco_epochs"]  # single frames
     assert (table["epochs_done"] == 0).all() and (table["hours_left"] == table["hours"]).all()
 

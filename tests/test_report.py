@@ -20,7 +20,26 @@ def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monke
     text = results_section("p", "make reproduce", False)
     assert "last pipeline run: 03_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
     assert "| C6 |" in text and "Not evaluated yet in this profile: C1" in text
-    assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 | 200 × 3 | 300 |" in text
+    assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 |  | 200 × 3 | 300 |" in text
+    assert "Pendulum training speed" not in text  # no notebook 01 table yet
+
+
+def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    claims.upsert("p", [claims.c6_speedup(3.0)])
+    base = {"study": "pendulum", "epochs": 200, "seeds": 3, "hours": 1.0, "epochs_done": 0, "hours_left": 1.0,
+            "threads": 1, "ratio_to": "no_dynamics"}
+    pd.DataFrame([{**base, "model": "no_dynamics", "epoch_s": 20.0, "step_ratio": 1.0},
+                  {**base, "model": "drf", "epoch_s": 29.0, "step_ratio": 1.456}]).to_csv(
+        tmp_path / "p" / "training_budget.csv")
+    (tmp_path / "p" / "tables").mkdir()
+    pd.DataFrame([{"model": "no_dynamics", "batch": 50, "frames": 75, "threads": 2, "step_median_s": 0.5,
+                   "ratio_to_no_dynamics": 1.0},
+                  {"model": "drf", "batch": 50, "frames": 75, "threads": 2, "step_median_s": 0.8,
+                   "ratio_to_no_dynamics": 1.61}]).to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
+    text = results_section("p", "make reproduce", False)
+    assert "| pendulum | drf | 29 | 1.46× no_dynamics | 200 × 3 |" in text
+    assert "(one run, 2 torch thread(s), batch 50 × 75 frames): a DRF step costs **1.61×** a no_dynamics step" in text
 
 
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):
