@@ -54,9 +54,9 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
     rows = []
     for study in ("pendulum", "pedestrians"):
         train = studies.study_data(P, study, "train")
+        configs = {kind: studies.train_config(P, study, kind, P.seeds[0]) for kind in studies.study_models(P, study)}
         groups: dict[tuple[bool, int], list[str]] = {}
-        for kind in studies.study_models(P, study):
-            cfg = studies.train_config(P, study, kind, P.seeds[0])
+        for kind, cfg in configs.items():
             groups.setdefault((cfg.framewise, cfg.batch_size), []).append(kind)
         for (framewise, batch_size), kinds in groups.items():
             kinds = sorted(kinds, key=lambda k: k != RATIO_BASE)  # the base first: it is the denominator
@@ -66,7 +66,7 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
                                        data.targets[:batch], n_batches_per_epoch=1, min_run_time=min_run_time)
             ratio = f"ratio_to_{kinds[0]}"
             for kind, s in zip(kinds, step.itertuples()):
-                cfg = studies.train_config(P, study, kind, P.seeds[0])
+                cfg = configs[kind]
                 step_s = float(s.step_median_s)
                 batches = int(np.ceil(len(data) / cfg.batch_size))
                 hours = step_s * batches * cfg.epochs * len(P.seeds) / 3600

@@ -287,14 +287,14 @@ def timing_subset(frames_per_sequence: torch.Tensor, max_frames: int) -> torch.T
     return torch.linspace(0, n - 1, k, dtype=torch.float64).round().long()
 
 
-def measure_interleaved(fns: dict[str, Callable[[], Any]], min_run_time: float, device: torch.device,
-                        block_s: float = 0.01, min_rounds: int = 5) -> dict[str, float]:
+def measure_interleaved(fns: dict[str, Callable[[], Any]], min_run_time: float, block_s: float = 0.01,
+                        min_rounds: int = 5) -> dict[str, float]:
     """Median seconds per call of each fn over interleaved rounds (``timing.interleaved_times``:
     blocks of about ``block_s`` seconds, the order rotated per round, at least ``min_rounds``
     rounds and about ``min_run_time`` seconds per fn), so a slow spell of a shared machine hits
     every setting alike."""
     with torch.no_grad():
-        per_round = interleaved_times(fns, min_run_time, device, block_s=block_s, min_rounds=min_rounds)
+        per_round = interleaved_times(fns, min_run_time, block_s=block_s, min_rounds=min_rounds)
     return {n: float(np.median(v)) for n, v in per_round.items()}
 
 
@@ -461,12 +461,12 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
         stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h_t, gains_t, real_t, s,
                                                                          **common, **e))
                      for name, (setting, extra) in timed.items()}
-        head_s = measure_interleaved(stage_fns, min_run_time / 2, device)
+        head_s = measure_interleaved(stage_fns, min_run_time / 2)
         whole_fns = {name: (lambda s=timed[name][0], e=timed[name][1]:
                             run_setting(model, x_t, real_t, s, **common, **e)) for name in SETTINGS}
         whole_fns["features"] = lambda: model.features(x_t)
         whole_fns["features_gains"] = lambda: model.features(x_t, return_gains=True)
-        whole_s = measure_interleaved(whole_fns, min_run_time, device, min_rounds=7)
+        whole_s = measure_interleaved(whole_fns, min_run_time, min_rounds=7)
     finally:
         model.train(was)
     n_timed = int(real_t.sum())

@@ -105,28 +105,16 @@ def _warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str =
     return timer, seconds
 
 
-def _measure(fn, min_run_time: float, label: str, sub_label: str, threads: int,
-             warmup: int = 1) -> benchmark.Measurement:
-    # blocked_autorange synchronises CUDA around each block of calls
-    timer, _ = _warm_timer(fn, threads, min_run_time, warmup, label, sub_label)
-    return timer.blocked_autorange(min_run_time=min_run_time)
-
-
-def _sync(device: torch.device | None) -> None:
-    if device is not None and device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
-def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, device: torch.device | None = None,
-                      block_s: float = 0.01, min_rounds: int = 5) -> dict[str, list[float]]:
+def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, block_s: float = 0.01,
+                      min_rounds: int = 5) -> dict[str, list[float]]:
     """Seconds per call of each fn, one value per round, measured in interleaved rounds.
 
     Each round times one block of calls (about ``block_s`` seconds, at least one call) of
     every fn in turn, the order rotated per round, so a slow spell of a shared machine hits
     every fn alike; per-round values of two fns can be divided to get a ratio in which such
     spells cancel. At least ``min_rounds`` rounds, and about ``min_run_time`` seconds per fn.
-    One warm-up call each. The clock is ``torch.utils.benchmark``'s; CUDA is synchronised
-    around each block when ``device`` is a GPU.
+    One warm-up call each. The clock is ``torch.utils.benchmark``'s, which synchronises an
+    accelerator before reading the time, so GPU work of a block is inside its time.
     """
     names = list(fns)
     if not names:
@@ -134,10 +122,8 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, de
     reps, block = {}, {}
     for name in names:  # warm-up, and how many calls make a block
         fns[name]()
-        _sync(device)
         start = synchronised_clock()
         fns[name]()
-        _sync(device)
         once = max(synchronised_clock() - start, 1e-7)
         reps[name] = max(1, int(block_s / once))
         block[name] = reps[name] * once
@@ -146,11 +132,9 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, de
     for r in range(rounds):
         for name in names[r % len(names):] + names[:r % len(names)]:
             fn, n = fns[name], reps[name]
-            _sync(device)
             start = synchronised_clock()
             for _ in range(n):
                 fn()
-            _sync(device)
             per_call[name].append((synchronised_clock() - start) / n)
     return per_call
 
@@ -184,7 +168,7 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        times = interleaved_times(steps, min_run_time, inputs.device, block_s=0.0, min_rounds=min_rounds)
+        times = interleaved_times(steps, min_run_time, block_s=0.0, min_rounds=min_rounds)
     finally:
         torch.set_num_threads(previous)
     base = next(iter(configs))

@@ -346,5 +346,5 @@ def test_measure_interleaved_reports_the_slower_function_as_slower():
     import time as _time
 
     out = gating.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
-                                     min_run_time=0.01, device=torch.device("cpu"), min_rounds=3)
+                                     min_run_time=0.01, min_rounds=3)
     assert out["slow"] > 0.0015 and out["fast"] < out["slow"]
