@@ -285,75 +285,92 @@ class _FusedStep(torch.autograd.Function):
     with the composed path to rounding (tests/test_filter.py, float64 and a float32 run of
     the DRF's size).
 
-    Backward (G = sym(dL/dP_new), M = I - K, all products batched; P-, G, H symmetric):
-        J = M P- M^T + K R K^T:   dL/dM = 2 G M P-,  dL/dP- = M^T G M,
-                                  dL/dK = 2 G K R - dL/dM,  dL/dr = diag(K^T G K)
-        z_new = z- + K d:         dL/dK += g d^T,  dL/dd = K^T g,  dL/dz- = g - dL/dd
-        K^T = S^-1 P-:            Y = S^-1 (dL/dK)^T,  dL/dS = -Y K,  dL/dP- += Y + dL/dS,
-                                  dL/dr += diag(dL/dS)
+    Backward (G = sym(dL/dP_new), g = dL/dz_new, M = I - K, d = w - z-; P-, G, H symmetric).
+    The Joseph form J(K) = M P- M^T + K R K^T is stationary in K at the optimal gain
+    (dJ = dK (S K^T - P-) + transpose = 0 for K = P- S^-1), so only its explicit
+    dependence on P- and R is differentiated; autograd through K would add rounding noise
+    at the cost of three batched products. K then gets dL/dK = g d^T (rank one), plus the
+    caller's dL/dK when K itself is used:
+        J at fixed K:             dL/dP- = M^T G M,  dL/dr = diag(K^T G K)
+        z_new = z- + K d:         dL/dw = K^T g,  dL/dz- = g - K^T g
+        K = P- S^-1, S = P- + R:  Y = S^-1 (dL/dK)^T,  dL/dP- += Y M,  dL/dr += diag(Y M) - diag(Y);
+                                  for dL/dK = g d^T: Y = u g^T, Y M = u v^T (u = S^-1 d, v = M^T g)
         P- = sym(F P F^T + Q):    H = sym(dL/dP-),  dL/dq = diag H,  dL/dF = H F (P + P^T),
                                   dL/dP = F^T H F;  z- = F z: dL/dF += g- z^T, dL/dz = F^T g-
+    A jittered S (``_safe_cholesky``) makes K slightly suboptimal; the dropped term is then
+    of the jitter's size, in a step that is an emergency fallback anyway.
     """
 
     @staticmethod
     def forward(ctx, z, P, F, q, w, r):
-        z_pred = _bmv(F, z)
-        P_pred = (F @ P) @ F.mT
-        P_pred.diagonal(dim1=-2, dim2=-1).add_(q)
-        P_pred = _symmetrise(P_pred)
-        S = P_pred.clone()
-        S.diagonal(dim1=-2, dim2=-1).add_(r)
-        S_inv = torch.cholesky_inverse(_safe_cholesky(S))
-        # K = P- S^-1 = (S - R) S^-1 = I - R S^-1: a row scaling of S^-1 instead of a matmul
-        I_minus_K = S_inv * r.unsqueeze(-1)
-        K = -I_minus_K
-        K.diagonal(dim1=-2, dim2=-1).add_(1.0)
-        innovation = w - z_pred
-        z_new = z_pred + _bmv(K, innovation)
-        P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
-        ctx.save_for_backward(z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
+        z_new, P_new, K, saved = fused_step_forward(z, P, F, q, w, r)
+        ctx.save_for_backward(*saved)
         ctx.set_materialize_grads(False)
-        return z_new, _symmetrise(P_new), K
+        return z_new, P_new, K
 
     @staticmethod
     @once_differentiable
     def backward(ctx, g_z, g_P, g_K_out):
-        z, P, F, r, P_pred, S_inv, K, M, innovation = ctx.saved_tensors
-        # dL/dK and dL/dr through the Joseph update, then the mean update
-        g_K = g_K_out
-        g_r = GM = None
-        if g_P is not None:
-            G = _symmetrise(g_P)
-            GM = G @ M
-            GK = G.sub_(GM)  # G K = G (I - M); G itself is not needed any more
-            g_r = (GK * K).sum(-2)
-            g_K_joseph = torch.baddbmm(GK * (2.0 * r).unsqueeze(-2), GM, P_pred, alpha=-2.0)
-            g_K = g_K_joseph if g_K is None else g_K_joseph.add_(g_K)
-        g_zp = g_w = None
-        if g_z is not None:
-            outer = g_z.unsqueeze(-1) * innovation.unsqueeze(-2)
-            g_K = outer if g_K is None else outer.add_(g_K)
-            g_w = _bmv(K.mT, g_z)
-            g_zp = g_z - g_w
-        if g_K is None:
-            g_K = torch.zeros_like(K)
-        # through K = P- S^-1: Y = S^-1 (dL/dK)^T, dL/dS = -Y K, dL/dP- = M^T G M + Y + dL/dS
-        # = M^T G M + Y M (as K = I - M), and diag(dL/dS) = diag(Y M) - diag(Y)
-        Y = S_inv @ g_K.mT
+        return fused_step_backward(ctx.saved_tensors, g_z, g_P, g_K_out)
+
+
+def fused_step_forward(z, P, F, q, w, r):
+    """The forward of ``_FusedStep``: (z_new, P_new, K, saved), ``saved`` being what
+    :func:`fused_step_backward` needs. Also the step of the DRF's whole-sequence recursion
+    (``drfkit.models.recursion``), which keeps ``saved`` per step itself."""
+    z_pred = _bmv(F, z)
+    P_pred = (F @ P) @ F.mT
+    P_pred.diagonal(dim1=-2, dim2=-1).add_(q)
+    P_pred = _symmetrise(P_pred)
+    S = P_pred.clone()
+    S.diagonal(dim1=-2, dim2=-1).add_(r)
+    S_inv = torch.cholesky_inverse(_safe_cholesky(S))
+    # K = P- S^-1 = (S - R) S^-1 = I - R S^-1: a row scaling of S^-1 instead of a matmul
+    I_minus_K = S_inv * r.unsqueeze(-1)
+    K = -I_minus_K
+    K.diagonal(dim1=-2, dim2=-1).add_(1.0)
+    innovation = w - z_pred
+    z_new = z_pred + _bmv(K, innovation)
+    P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
+    return z_new, _symmetrise(P_new), K, (z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
+
+
+def fused_step_backward(saved, g_z, g_P, g_K_out):
+    """Gradients (z, P, F, q, w, r) of one fused step from the upstream gradients of
+    (z_new, P_new, K), any of which may be None; formulas in ``_FusedStep``'s docstring."""
+    z, P, F, r, P_pred, S_inv, K, M, innovation = saved
+    g_Pp = g_r = g_zp = g_w = None  # dL/dP-, dL/dr, dL/dz-, dL/dw
+    if g_P is not None:  # Joseph form at fixed K (its K-derivative vanishes at the optimal gain)
+        G = _symmetrise(g_P)
+        GM = G @ M
+        g_r = ((G - GM) * K).sum(-2)  # diag(K^T G K), as G K = G - G M
+        g_Pp = M.mT @ GM
+    if g_z is not None:  # z_new = z- + K d, and K = P- S^-1 with dL/dK = g d^T of rank one
+        g_w = _bmv(K.mT, g_z)
+        g_zp = g_z - g_w
+        u, v = _bmv(S_inv, innovation), _bmv(M.mT, g_z)  # Y = u g^T, Y M = u v^T
+        g_Pp = torch.baddbmm(g_Pp, u.unsqueeze(-1), v.unsqueeze(-2)) if g_Pp is not None \
+            else u.unsqueeze(-1) * v.unsqueeze(-2)
+        g_r_mean = u * (v - g_z)
+        g_r = g_r_mean if g_r is None else g_r.add_(g_r_mean)
+    if g_K_out is not None:  # through K = P- S^-1: Y = S^-1 (dL/dK)^T, dL/dP- += Y M
+        Y = S_inv @ g_K_out.mT
         YM = Y @ M
+        g_Pp = YM if g_Pp is None else g_Pp.add_(YM)
         g_S_diag = YM.diagonal(dim1=-2, dim2=-1) - Y.diagonal(dim1=-2, dim2=-1)
         g_r = g_S_diag if g_r is None else g_r.add_(g_S_diag)
-        g_Pp = YM if GM is None else YM.baddbmm_(M.mT, GM)
-        H = _symmetrise(g_Pp)
-        g_q = H.diagonal(dim1=-2, dim2=-1).clone()
-        HF = H @ F
-        g_F = HF @ (P + P.mT)
-        g_Pin = F.mT @ HF
-        g_zin = None
-        if g_zp is not None:
-            g_F.addcmul_(g_zp.unsqueeze(-1), z.unsqueeze(-2))
-            g_zin = _bmv(F.mT, g_zp)
-        return g_zin, g_Pin, g_F, g_q, g_w, g_r
+    if g_Pp is None:
+        return (None,) * 6
+    H = _symmetrise(g_Pp)
+    g_q = H.diagonal(dim1=-2, dim2=-1).clone()
+    HF = H @ F
+    g_F = HF @ (P + P.mT)
+    g_Pin = F.mT @ HF
+    g_zin = None
+    if g_zp is not None:
+        g_F.addcmul_(g_zp.unsqueeze(-1), z.unsqueeze(-2))
+        g_zin = _bmv(F.mT, g_zp)
+    return g_zin, g_Pin, g_F, g_q, g_w, g_r
 
 
 def kalman_step(z: torch.Tensor, P: torch.Tensor, F: torch.Tensor, Q: torch.Tensor,

@@ -9,8 +9,8 @@ import inspect
 from typing import Any
 
 from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_loss
-from drfkit.models.parts import (Decoder, ImageEncoder, KeypointEncoder, ObservationHeads,
-                                 TransitionNetwork)
+from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads
+from drfkit.models.recursion import TransitionNetwork
 from drfkit.models.sequence import (INPUT_KINDS, DeepRecursiveFilter, LSTMBaseline, NoDynamics,
                                     SequenceModel, gaussian_nll)
 

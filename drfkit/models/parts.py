@@ -150,44 +150,6 @@ def mean_and_log_variance(mean: torch.Tensor, variance: torch.Tensor) -> torch.T
     return torch.cat([mean, torch.log(variance)], dim=-1)
 
 
-class TransitionNetwork(nn.Module):
-    """Previous posterior mean z_{t-1} (B, n) -> F_t (B, n, n), diagonal q_t of Q_t (B, n).
-
-    Two stacked LSTM cells (hidden size ``hidden``) read z_{t-1} only, as in the paper
-    ("a dynamical model in the latent embedding"); P_{t-1} does not enter. One fused
-    Linear emits both outputs: F_t = I + residual, q_t = ELU(.) + 1 (+ VARIANCE_FLOOR).
-    The residual part of the head starts at zero (weights and bias), so an untrained
-    filter has F = I: a random-walk prior, which is stable from the first step.
-    """
-
-    def __init__(self, latent: int = 30, hidden: int = 64):
-        super().__init__()
-        self.latent = latent
-        self.hidden = hidden
-        self.cell1 = nn.LSTMCell(latent, hidden)
-        self.cell2 = nn.LSTMCell(hidden, hidden)
-        self.head = nn.Linear(hidden, latent * latent + latent)
-        with torch.no_grad():
-            self.head.weight[: latent * latent].zero_()
-            self.head.bias[: latent * latent].zero_()
-        self.register_buffer("eye", torch.eye(latent), persistent=False)
-
-    def initial_state(self, batch: int, like: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        zeros = like.new_zeros(batch, self.hidden)
-        return zeros, zeros, zeros, zeros
-
-    def forward(self, z: torch.Tensor, state: tuple[torch.Tensor, ...]
-                ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
-        h1, c1, h2, c2 = state
-        h1, c1 = self.cell1(z, (h1, c1))
-        h2, c2 = self.cell2(h1, (h2, c2))
-        out = self.head(h2)
-        n = self.latent
-        F_t = out[:, : n * n].view(-1, n, n) + self.eye
-        q_t = positive_elu(out[:, n * n:], VARIANCE_FLOOR)
-        return F_t, q_t, (h1, c1, h2, c2)
-
-
 class Decoder(nn.Module):
     """x (..., in_dim) -> mean (..., out_dim), sigma (..., out_dim), with MC dropout.
 

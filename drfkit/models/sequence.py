@@ -27,7 +27,8 @@ from torch import nn
 
 from drfkit.filter import kalman_step
 from drfkit.models.parts import (IMAGE_DOWNSAMPLES, Decoder, ImageEncoder, KeypointEncoder, ObservationHeads,
-                                 TransitionNetwork, check_dropout_p, mean_and_log_variance)
+                                 check_dropout_p, mean_and_log_variance)
+from drfkit.models.recursion import TransitionNetwork, drf_recursion
 
 INPUT_KINDS = ("pendulum", "keypoints")
 
@@ -206,6 +207,8 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     Start: z_0 = w_0, P_0 = diag(r_0) -- the exact posterior after the first observation
     under an uninformative prior, so the gain at t = 0 is reported as I.
     The filter is causal: padding must trail a sequence's valid frames.
+    In training the loop runs as one autograd node (``drfkit.models.recursion``), at
+    inference step by step; both compute the same values (tests/test_recursion.py).
     """
 
     kind = "drf"
@@ -219,16 +222,24 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                          _extra_config={"transition_hidden": transition_hidden}, **kwargs)
         self.transition = TransitionNetwork(latent, transition_hidden)
 
-    def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False
-                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
+                   whole_sequence: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Filter observations w (B, T, n) with noise variances r (B, T, n).
 
         Returns posterior means z (B, T, n), posterior variances diag(P) (B, T, n) and,
-        if asked, the gains K (B, T, n, n) (else None).
+        if asked, the gains K (B, T, n, n) (else None). When gradients are wanted (training)
+        and gains are not, the recursion runs as one autograd node with a hand-written
+        backward (``drfkit.models.recursion``); ``whole_sequence=False`` forces the
+        per-step loop below, which autograd differentiates step by step (same values; the
+        tests compare the two). Inference always takes the per-step loop.
         """
         if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != self.latent:
             raise ValueError(f"w and r must both have shape (B, T, {self.latent}), "
                              f"got {tuple(w.shape)} and {tuple(r.shape)}")
+        if whole_sequence and not return_gains and torch.is_grad_enabled() and (
+                w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
+            z, p_diag = drf_recursion(self.transition, w, r)
+            return z, p_diag, None
         batch, steps, n = w.shape
         # unbind once: indexing w[:, t] in the loop would make the backward pass build
         # and sum T zero-padded (B, T, n) gradients, one per step
