@@ -258,6 +258,24 @@ def load_profile(profile: str | Path) -> dict[str, Any]:
     return values
 
 
+def parse_overrides(items: list[str] | None) -> dict:
+    """``["key=yaml value", ...]`` -> {key: value}, keys checked against the schema (the
+    ``--set`` option of ``drfkit.pipeline`` and ``drfkit.studies``)."""
+    out = {}
+    for item in items or []:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise ParameterError(f"--set expects KEY=VALUE (VALUE in YAML, e.g. eval_studies=[pedestrians]), "
+                                 f"got {item!r}")
+        if key not in SPECS:
+            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(SPECS)}")
+        try:
+            out[key] = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ParameterError(f"--set {key}: {text!r} is not a YAML value ({exc})") from None
+    return out
+
+
 def notebook_params(notebook: str, profile_values: dict[str, Any]) -> dict[str, Any]:
     """The subset of a profile that ``notebook`` declares, validated (raises on error)."""
     subset = {k: profile_values[k] for k in NOTEBOOKS[notebook] if k in profile_values}

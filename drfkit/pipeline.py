@@ -14,31 +14,12 @@ import time
 from pathlib import Path
 
 from drfkit.manifest import now_iso, update_manifest
-from drfkit.params import NOTEBOOKS, SPECS, ParameterError, load_profile, notebook_params
+from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
 from drfkit.paths import NOTEBOOKS_DIR, results_dir
 
 
 def notebook_path(name: str) -> Path:
     return NOTEBOOKS_DIR / f"{name}.ipynb"
-
-
-def parse_overrides(items: list[str] | None) -> dict:
-    """``["key=yaml value", ...]`` -> {key: value}, keys checked against the schema."""
-    import yaml
-
-    out = {}
-    for item in items or []:
-        key, sep, text = item.partition("=")
-        if not sep or not key:
-            raise ParameterError(f"--set expects KEY=VALUE (VALUE in YAML, e.g. eval_studies=[pedestrians]), "
-                                 f"got {item!r}")
-        if key not in SPECS:
-            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(SPECS)}")
-        try:
-            out[key] = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ParameterError(f"--set {key}: {text!r} is not a YAML value ({exc})") from None
-    return out
 
 
 def run(profile: str, only: list[str] | None = None, kernel: str = "python3",

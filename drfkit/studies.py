@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.params import ParameterError, load_profile, notebook_params, parse_overrides, validate
     from drfkit.runtime import setup
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
@@ -200,10 +200,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--models", nargs="*", help="model kinds (default: the profile's)")
     parser.add_argument("--seeds", nargs="*", type=int, help="model seeds (default: the profile's)")
     parser.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
+    parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
+                        help="override profile values (VALUE in YAML), e.g. pend_patience=0 to train "
+                             "runs that the early stop ended on to the last epoch")
     args = parser.parse_args(argv)
     notebook = TRAINING_NOTEBOOK[args.study]
     try:
-        P = validate(notebook, notebook_params(notebook, load_profile(args.profile)))
+        values = load_profile(args.profile) | parse_overrides(args.set)
+        P = validate(notebook, notebook_params(notebook, values))
         unknown = sorted(set(args.models or []) - set(study_models(P, args.study)))
         if unknown:
             raise ParameterError(f"--models {unknown} are not models of the {args.study} study in this "

@@ -141,10 +141,13 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, bl
 
 def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor, targets: torch.Tensor,
                         n_batches_per_epoch: int, min_run_time: float = 1.0,
-                        threads: int | None = None, seed: int = 0, min_rounds: int = 5) -> pd.DataFrame:
+                        threads: int | None = None, seed: int = 0, min_rounds: int = 5,
+                        model_attrs: dict[str, dict[str, Any]] | None = None) -> pd.DataFrame:
     """Median seconds of one training step per model, and the implied seconds per epoch.
 
     configs: name -> model config; inputs (B, T, ...) and targets (B, T, out): one batch.
+    model_attrs: name -> attributes to set on that built model, e.g. ``{"whole_sequence": False}``
+    to time a DRF that differentiates its per-step loop with autograd (attributes must exist).
     The models are timed in interleaved rounds (``interleaved_times``, about ``min_run_time``
     seconds each, at ``threads``). Returns columns model, batch, frames, threads, rounds,
     step_median_s, step_iqr_s (over rounds), epoch_s, and ratio_to_<first model>: the median
@@ -157,6 +160,10 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
     for name, config in configs.items():
         torch.manual_seed(seed)
         model = build_model(config).train()
+        for attr, value in (model_attrs or {}).get(name, {}).items():
+            if not hasattr(model, attr):
+                raise ValueError(f"model_attrs[{name!r}]: {type(model).__name__} has no attribute {attr!r}")
+            setattr(model, attr, value)
         params = list(model.parameters())
 
         def step(model=model, params=params):

@@ -34,7 +34,7 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
 
 def test_overrides_are_parsed_as_yaml_and_checked():
     from drfkit.params import ParameterError
-    from drfkit.pipeline import parse_overrides
+    from drfkit.params import parse_overrides
 
     assert parse_overrides(["eval_studies=[pedestrians]", "threads=1"]) == {"eval_studies": ["pedestrians"],
                                                                             "threads": 1}

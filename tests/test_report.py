@@ -40,6 +40,12 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
     text = results_section("p", "make reproduce", False)
     assert "| pendulum | drf | 29 | 1.46× no_dynamics | 200 × 3 |" in text
     assert "(one run, 2 torch thread(s), batch 50 × 75 frames): a DRF step costs **1.61×** a no_dynamics step" in text
+    assert "step by step" not in text  # no per-step row in that table
+    speed = pd.read_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv", index_col=0)
+    pd.concat([speed, speed.tail(1).assign(model="drf_per_step", ratio_to_no_dynamics=1.78)]).to_csv(
+        tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
+    assert "target ≤ 1.5×; 1.78× when autograd differentiates the filter step by step" in \
+        results_section("p", "make reproduce", False)
 
 
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):

@@ -44,6 +44,25 @@ def test_cli_rejects_what_the_notebooks_would_never_use(tiny_profile, capsys, ar
     assert message in capsys.readouterr().err
 
 
+def test_cli_set_overrides_the_profile(tiny_profile, tmp_path):
+    import torch
+
+    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
+                         "--seeds", "0", "--threads", "1", "--set", "pend_epochs=2"]) == 0
+    (last,) = (tmp_path / "results" / "tiny" / "models").glob("pendulum-no_dynamics-seed0-*-last.pt")
+    assert torch.load(last, weights_only=False)["epoch"] == 2
+
+
+@pytest.mark.parametrize("item, message", [
+    ("pend_patience=-1", "pend_patience"),
+    ("no_such_key=1", "unknown parameter"),
+    ("pend_patience", "KEY=VALUE"),
+])
+def test_cli_rejects_bad_overrides(tiny_profile, capsys, item, message):
+    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", "--set", item]) == 2
+    assert message in capsys.readouterr().err
+
+
 def test_cli_rejects_unknown_profile(capsys):
     assert studies.main(["--profile", "no_such_profile", "--study", "pendulum"]) == 2
     assert "known profiles" in capsys.readouterr().err

@@ -226,3 +226,21 @@ def test_training_step_ratio_is_the_median_of_per_round_ratios(monkeypatch):
     row = speed.set_index("model").loc["drf"]
     assert row["ratio_to_no_dynamics"] == 2.0 and row["step_median_s"] == 5.0 and row["rounds"] == 5
     assert row["epoch_s"] == 10.0 and row["step_iqr_s"] == pytest.approx(10.0 - 3.0)
+
+
+def test_training_step_times_sets_model_attributes_and_rejects_unknown_ones(monkeypatch):
+    from drfkit.models import default_config, recursion
+
+    config = default_config("drf", "keypoints", 1)
+    inputs, targets = example_frames("pedestrians", 2, 3), torch.rand(2, 3, 1) + 5.0
+    calls = []
+    real = recursion.drf_recursion
+    monkeypatch.setattr("drfkit.models.sequence.drf_recursion", lambda *a: calls.append(1) or real(*a))
+    for attrs, one_node in (({}, True), ({"whole_sequence": False}, False)):
+        calls.clear()
+        speed = timing.training_step_times({"drf": config}, inputs, targets, n_batches_per_epoch=1,
+                                           min_run_time=0.01, min_rounds=2, model_attrs={"drf": attrs})
+        assert (speed["step_median_s"] > 0).all() and bool(calls) == one_node
+    with pytest.raises(ValueError, match="no attribute 'whole_sequnce'"):
+        timing.training_step_times({"drf": config}, inputs, targets, n_batches_per_epoch=1, min_run_time=0.01,
+                                   model_attrs={"drf": {"whole_sequnce": False}})

@@ -212,6 +212,9 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     """
 
     kind = "drf"
+    #: train through the one-node recursion; False differentiates the per-step loop with autograd
+    #: (same values, slower: kept for the tests and for timing the difference, not a config option)
+    whole_sequence = True
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  transition_hidden: int = 64, **kwargs: Any):
@@ -223,19 +226,21 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         self.transition = TransitionNetwork(latent, transition_hidden)
 
     def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
-                   whole_sequence: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+                   whole_sequence: bool | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Filter observations w (B, T, n) with noise variances r (B, T, n).
 
         Returns posterior means z (B, T, n), posterior variances diag(P) (B, T, n) and,
         if asked, the gains K (B, T, n, n) (else None). When gradients are wanted (training)
         and gains are not, the recursion runs as one autograd node with a hand-written
-        backward (``drfkit.models.recursion``); ``whole_sequence=False`` forces the
-        per-step loop below, which autograd differentiates step by step (same values; the
-        tests compare the two). Inference always takes the per-step loop.
+        backward (``drfkit.models.recursion``); ``whole_sequence=False`` (default: the
+        ``whole_sequence`` attribute) forces the per-step loop below, which autograd
+        differentiates step by step (same values; the tests compare the two). Inference always
+        takes the per-step loop.
         """
         if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != self.latent:
             raise ValueError(f"w and r must both have shape (B, T, {self.latent}), "
                              f"got {tuple(w.shape)} and {tuple(r.shape)}")
+        whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
         if whole_sequence and not return_gains and torch.is_grad_enabled() and (
                 w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
             z, p_diag = drf_recursion(self.transition, w, r)

@@ -113,8 +113,11 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # One optimisation step (forward, loss, backward) of each model on the same batch of 50 × T frames,
 # measured in one run in interleaved rounds (`drfkit.timing.training_step_times`: each round times
 # every model in turn, so a slow spell of the machine hits all of them); seconds per epoch follow
-# from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios.
-# The target is a DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count.
+# from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios
+# (at least 15 rounds). The target is a DRF epoch at most 1.5× a no_dynamics epoch, at the
+# notebook's thread count. In training the DRF's recursion runs as one autograd node with a
+# hand-written backward (`drfkit.models.recursion`; the tests check it against autograd);
+# `drf_per_step` is the same model differentiated step by step by autograd, for comparison.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -122,10 +125,10 @@ from drfkit.timing import training_step_times
 
 train = studies.pendulum_data(P, "train")
 batch = min(50, len(train))
-speed = training_step_times({k: studies.model_config("pendulum", k) for k in ["no_dynamics", "lstm", "drf"]},
-                            train.inputs[:batch], train.targets[:batch],
+configs = {k: studies.model_config("pendulum", k) for k in ["no_dynamics", "lstm", "drf"]}
+speed = training_step_times(configs | {"drf_per_step": configs["drf"]}, train.inputs[:batch], train.targets[:batch],
                             n_batches_per_epoch=int(np.ceil(P.pend_train_sequences / batch)),
-                            min_run_time=0.5)
+                            min_run_time=0.5, min_rounds=15, model_attrs={"drf_per_step": {"whole_sequence": False}})
 save_table(P.profile, "pendulum_training_speed", speed)
 drf_ratio = float(speed.set_index("model").loc["drf", "ratio_to_no_dynamics"])
 print(f"a DRF training step costs {drf_ratio:.2f}x a no_dynamics step at {int(speed['threads'].iloc[0])} thread(s); "
