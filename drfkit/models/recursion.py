@@ -161,9 +161,9 @@ class _DRFRecursion(torch.autograd.Function):
         records = [StepRecord(*saved[10 + s * n_rec: 10 + (s + 1) * n_rec]) for s in range(steps - 1)]
         start = 10 + (steps - 1) * n_rec
         filter_saved = [saved[start + s * n_fil: start + (s + 1) * n_fil] for s in range(steps - 1)]
-        g_w, g_r = torch.empty_like(g_means), torch.empty_like(g_vars)
         if steps == 1:  # no transition step: z_0 = w_0, P_0 = diag(r_0)
             return (g_means, g_vars, None, None) + (None,) * 10
+        g_w, g_r = torch.empty_like(g_means), torch.empty_like(g_vars)
         # pre-activation gradients of every step (cell 1, cell 2, head), for the weight gradients
         d_gates1 = g_means.new_empty(steps - 1, batch, 4 * ctx.hidden)
         d_gates2 = torch.empty_like(d_gates1)
@@ -203,4 +203,7 @@ class _DRFRecursion(torch.autograd.Function):
 def drf_recursion(transition: TransitionNetwork, w: torch.Tensor, r: torch.Tensor
                   ) -> tuple[torch.Tensor, torch.Tensor]:
     """Posterior means z and variances diag P (B, T, n) of w, r (B, T, n), as one node."""
+    if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != transition.latent:
+        raise ValueError(f"w and r must both have shape (B, T, {transition.latent}), "
+                         f"got {tuple(w.shape)} and {tuple(r.shape)}")
     return _DRFRecursion.apply(w, r, transition.eye, transition.hidden, *transition.weights())

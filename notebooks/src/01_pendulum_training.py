@@ -17,8 +17,10 @@
 # run resumes. The paper's schedule is Adam 1e-4 for 200 epochs; it does not state the batch
 # size: we use 50 sequences. Trained on max noise 0.5, tested at 0.5 and 0.75 (out of distribution).
 # `pend_patience` (ours) ends a run that many epochs after its best validation NLL; 0 trains every
-# epoch. Where a run was trained (CPU, or a GPU when one was lent) is recorded per epoch in the
-# training curves.
+# epoch. In the paper profile the three DRF runs were afterwards trained on to the paper's 200
+# epochs (`python -m drfkit.studies --profile paper --study pendulum --models drf --set pend_patience=0`);
+# a run past its early stop counts as finished here. Where a run was trained (CPU, or a GPU when one
+# was lent) is recorded per epoch in the training curves.
 
 # %% tags=["parameters"]
 
