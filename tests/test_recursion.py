@@ -117,14 +117,10 @@ def test_model_gradients_whole_sequence_vs_per_step_float32_drf_size():
     params = list(model.parameters())
     grads = {}
     for whole in (True, False):
-        original = model.run_filter
-        model.run_filter = lambda w, r, return_gains=False: original(w, r, return_gains, whole_sequence=whole)
-        try:
-            torch.manual_seed(5)  # the decoder's dropout draws the same masks in both runs
-            mean, sigma = model(images)
-            grads[whole] = torch.autograd.grad(model.loss(mean, sigma, targets), params, allow_unused=True)
-        finally:
-            model.run_filter = original
+        model.whole_sequence = whole
+        torch.manual_seed(5)  # the decoder's dropout draws the same masks in both runs
+        mean, sigma = model(images)
+        grads[whole] = torch.autograd.grad(model.loss(mean, sigma, targets), params, allow_unused=True)
     for (name, _), a, b in zip(model.named_parameters(), grads[True], grads[False]):
         if b is None:
             assert a is None, name

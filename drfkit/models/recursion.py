@@ -200,10 +200,15 @@ class _DRFRecursion(torch.autograd.Function):
         return (g_w, g_r, None, None) + grads
 
 
+def check_observations(w: torch.Tensor, r: torch.Tensor, latent: int) -> None:
+    """w and r must both be (B, T, latent): the filter's observations and their variances."""
+    if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != latent:
+        raise ValueError(f"w and r must both have shape (B, T, {latent}), "
+                         f"got {tuple(w.shape)} and {tuple(r.shape)}")
+
+
 def drf_recursion(transition: TransitionNetwork, w: torch.Tensor, r: torch.Tensor
                   ) -> tuple[torch.Tensor, torch.Tensor]:
     """Posterior means z and variances diag P (B, T, n) of w, r (B, T, n), as one node."""
-    if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != transition.latent:
-        raise ValueError(f"w and r must both have shape (B, T, {transition.latent}), "
-                         f"got {tuple(w.shape)} and {tuple(r.shape)}")
+    check_observations(w, r, transition.latent)
     return _DRFRecursion.apply(w, r, transition.eye, transition.hidden, *transition.weights())

@@ -28,7 +28,7 @@ from torch import nn
 from drfkit.filter import kalman_step
 from drfkit.models.parts import (IMAGE_DOWNSAMPLES, Decoder, ImageEncoder, KeypointEncoder, ObservationHeads,
                                  check_dropout_p, mean_and_log_variance)
-from drfkit.models.recursion import TransitionNetwork, drf_recursion
+from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 
 INPUT_KINDS = ("pendulum", "keypoints")
 
@@ -237,9 +237,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         differentiates step by step (same values; the tests compare the two). Inference always
         takes the per-step loop.
         """
-        if w.ndim != 3 or r.shape != w.shape or w.shape[-1] != self.latent:
-            raise ValueError(f"w and r must both have shape (B, T, {self.latent}), "
-                             f"got {tuple(w.shape)} and {tuple(r.shape)}")
+        check_observations(w, r, self.latent)
         whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
         if whole_sequence and not return_gains and torch.is_grad_enabled() and (
                 w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
