@@ -355,6 +355,27 @@ def test_fused_step_matches_composed_values_and_gradients(used):
             torch.testing.assert_close(a, b, rtol=0, atol=1e-11, msg=name)
 
 
+def test_fused_backward_for_symmetric_inputs_matches_the_general_one_and_writes_out_F():
+    # symmetric=True (the DRF recursion's case) skips sym(g_P) and P + P^T; with symmetric
+    # P and g_P it must give the general backward's gradients, dL/dF written into out_F
+    from drfkit.filter import fused_step_backward, fused_step_forward
+
+    args = _batched_args(seed=4)
+    *_, saved = fused_step_forward(*args.values())
+    g = torch.Generator().manual_seed(5)
+    g_z = torch.randn(4, 5, generator=g, dtype=torch.float64)
+    A = torch.randn(4, 5, 5, generator=g, dtype=torch.float64)
+    g_P = A + A.mT
+    general = fused_step_backward(saved, g_z, g_P, None)
+    out_F = torch.full((4, 5, 5), float("nan"), dtype=torch.float64)
+    lean = fused_step_backward(saved, g_z, g_P, None, symmetric=True, out_F=out_F)
+    assert lean[2].data_ptr() == out_F.data_ptr()
+    for name, a, b in zip(("z", "P", "F", "q", "w", "r"), lean, general):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-12, msg=name)
+    only_P = fused_step_backward(saved, None, g_P, None, symmetric=True)  # no out_F, no dL/dz_new
+    torch.testing.assert_close(only_P[1], fused_step_backward(saved, None, g_P, None)[1], rtol=0, atol=1e-12)
+
+
 def test_gradcheck_fused_step_with_unsymmetric_P():
     # the gradient is that of the function on any P (it enters through F P F^T, then symmetrised)
     args = _batched_args(b=2, n=3, seed=2)

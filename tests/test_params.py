@@ -29,6 +29,19 @@ def test_paper_profile_is_paper_scale():
     assert paper["pend_seq_len"] == 75 and paper["pend_epochs"] == 200 and paper["pend_lr"] == 1e-4
     assert len(paper["seeds"]) >= 3
     assert paper["pend_eval_max_noise"] == [0.5, 0.75] and paper["ped_eval_p"] == [0.01, 0.025, 0.05]
+    assert paper["pend_patience"] == 0  # no early stop: the paper's 200 epochs
+
+
+def test_committed_paper_pendulum_runs_trained_every_epoch():
+    import pandas as pd
+
+    from drfkit.paths import REPO_ROOT
+
+    paper = load_profile("paper")
+    table = pd.read_csv(REPO_ROOT / "results/paper/tables/pendulum_model_selection.csv")
+    runs = {(m, s) for m in paper["pend_models"] for s in paper["seeds"]}
+    assert set(zip(table["model"], table["seed"])) == runs
+    assert (table["epochs"] == paper["pend_epochs"]).all(), table[["model", "seed", "epochs"]]
 
 
 def _parameters_cells(nb_path):

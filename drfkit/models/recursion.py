@@ -8,7 +8,8 @@ view) and computes the weight gradients of the three layers once per step. Here 
 forward runs without a graph and keeps what the backward needs; the backward walks the
 steps in reverse, stores each layer's pre-activation gradients for all steps, and forms
 the weight gradients at the end as one (out, T*B) x (T*B, in) product per weight -- large
-matrix products instead of 3 x (T - 1) small ones.
+matrix products instead of 3 x (T - 1) small ones (the head's in two, its F_t rows and its
+q_t rows: the filter's backward writes dL/dF_t straight into a buffer of its own).
 
 The forward math is shared with inference: :func:`lstm_cell` follows ``torch.nn.LSTMCell``
 on the CPU op for op (``linear_hh(h) + linear_ih(x)``, then the gate nonlinearities, tested
@@ -127,77 +128,96 @@ class TransitionNetwork(nn.Module):
         return transition_step(z, state, self.weights(), self.eye)
 
 
+def _forward_loop(w, r, eye, hidden, weights):
+    """The recursion's forward on w, r (B, T, n): means, variances (B, T, n) and, per step
+    t = 1..T-1, the transition's :class:`StepRecord` and the filter step's saved tensors."""
+    batch, steps, n = w.shape
+    w_steps, r_steps = w.unbind(1), r.unbind(1)
+    z, P = w_steps[0], torch.diag_embed(r_steps[0])
+    zero = w.new_zeros(batch, hidden)
+    state = (zero, zero, zero, zero)
+    means, variances, records, filter_saved = [z], [r_steps[0]], [], []
+    for t in range(1, steps):
+        F_t, q_t, state = transition_step(z, state, weights, eye, records)
+        z, P, _, saved = fused_step_forward(z, P, F_t, q_t, w_steps[t], r_steps[t])
+        filter_saved.append(saved)
+        means.append(z)
+        variances.append(P.diagonal(dim1=-2, dim2=-1))
+    return torch.stack(means, dim=1), torch.stack(variances, dim=1), records, filter_saved
+
+
+def _backward_loop(g_means, g_vars, records, filter_saved, weights, hidden):
+    """Gradients of w, r (B, T, n) and of the 10 transition weights, from those of the
+    means and variances (B, T, n), for one :func:`_forward_loop` (T >= 2)."""
+    w_ih1, w_hh1, _, _, w_ih2, w_hh2, _, _, w_head, _ = weights
+    batch, steps, n = g_means.shape
+    g_w, g_r = torch.empty_like(g_means), torch.empty_like(g_vars)
+    # pre-activation gradients of every step (cell 1, cell 2, head: F_t's part, q_t's part),
+    # for the weight gradients; the fused backward writes dL/dF_t straight into d_F[s]
+    d_gates1 = g_means.new_empty(steps - 1, batch, 4 * hidden)
+    d_gates2 = torch.empty_like(d_gates1)
+    d_F, d_q = g_means.new_empty(steps - 1, batch, n, n), g_means.new_empty(steps - 1, batch, n)
+    w_head_F, w_head_q = w_head[: n * n], w_head[n * n:]
+    # q = ELU(x) + 1 + floor: slope 1 for x > 0, exp(x) = ELU(x) + 1 otherwise (all steps at once)
+    q_pre = torch.stack([rec.q_pre for rec in records])
+    q_slope = torch.where(q_pre > 0, 1.0, q_pre.exp())
+    g_z, g_P = g_means[:, -1], torch.diag_embed(g_vars[:, -1])
+    dh1 = dc1 = dh2 = dc2 = g_means.new_zeros(batch, hidden)  # from step t + 1
+    for t in range(steps - 1, 0, -1):
+        rec, s = records[t - 1], t - 1
+        g_z_prev, g_P_prev, _, g_q, g_w[:, t], g_r[:, t] = fused_step_backward(
+            filter_saved[s], g_z, g_P, None, symmetric=True, out_F=d_F[s])
+        torch.mul(g_q, q_slope[s], out=d_q[s])
+        dh2 = torch.addmm(torch.addmm(dh2, d_F[s].view(batch, n * n), w_head_F), d_q[s], w_head_q)
+        dc2 = lstm_cell_backward(dh2, dc2, rec.act2, rec.tanh_c2, rec.c2_prev, out=d_gates2[s])
+        dh1 = torch.addmm(dh1, d_gates2[s], w_ih2)
+        dh2 = d_gates2[s] @ w_hh2
+        dc1 = lstm_cell_backward(dh1, dc1, rec.act1, rec.tanh_c1, rec.c1_prev, out=d_gates1[s])
+        dh1 = d_gates1[s] @ w_hh1
+        g_z = torch.addmm(g_z_prev, d_gates1[s], w_ih1).add_(g_means[:, s])
+        g_P = g_P_prev
+        g_P.diagonal(dim1=-2, dim2=-1).add_(g_vars[:, s])
+    g_w[:, 0] = g_z
+    g_r[:, 0] = g_P.diagonal(dim1=-2, dim2=-1)
+
+    def rows(name):  # one StepRecord field over all steps: ((T-1) B, k)
+        return torch.stack([getattr(rec, name) for rec in records]).flatten(0, 1)
+
+    dg1, dg2 = d_gates1.flatten(0, 1), d_gates2.flatten(0, 1)
+    dF, dq, h2 = d_F.view(-1, n * n), d_q.flatten(0, 1), rows("h2")
+    db1, db2 = dg1.sum(0), dg2.sum(0)  # b_ih and b_hh enter the same sum: equal gradients
+    grads = (dg1.T @ rows("z_prev"), dg1.T @ rows("h1_prev"), db1, db1.clone(),
+             dg2.T @ rows("h1"), dg2.T @ rows("h2_prev"), db2, db2.clone(),
+             torch.cat((dF.T @ h2, dq.T @ h2)), torch.cat((dF.sum(0), dq.sum(0))))
+    return g_w, g_r, grads
+
+
 class _DRFRecursion(torch.autograd.Function):
     """(w, r (B, T, n), the 10 transition weights) -> z, diag P (B, T, n); see the module
     docstring. Starts at z_0 = w_0, P_0 = diag(r_0), LSTM state zero, as ``run_filter``."""
 
     @staticmethod
     def forward(ctx, w, r, eye, hidden, *weights):
-        batch, steps, n = w.shape
-        w_steps, r_steps = w.unbind(1), r.unbind(1)
-        z, P = w_steps[0], torch.diag_embed(r_steps[0])
-        zero = w.new_zeros(batch, hidden)
-        state = (zero, zero, zero, zero)
-        means, variances, records, filter_saved = [z], [r_steps[0]], [], []
-        for t in range(1, steps):
-            F_t, q_t, state = transition_step(z, state, weights, eye, records)
-            z, P, _, saved = fused_step_forward(z, P, F_t, q_t, w_steps[t], r_steps[t])
-            filter_saved.append(saved)
-            means.append(z)
-            variances.append(P.diagonal(dim1=-2, dim2=-1))
+        means, variances, records, filter_saved = _forward_loop(w, r, eye, hidden, weights)
         # saved flat, so that autograd frees them after the backward (or keeps them for retain_graph)
         ctx.save_for_backward(*weights, *(x for rec in records for x in rec),
                               *(x for saved in filter_saved for x in saved))
         ctx.hidden, ctx.n_filter_saved = hidden, len(filter_saved[0]) if filter_saved else 0
-        return torch.stack(means, dim=1), torch.stack(variances, dim=1)
+        return means, variances
 
     @staticmethod
     @once_differentiable
     def backward(ctx, g_means, g_vars):
         saved = ctx.saved_tensors
-        w_ih1, w_hh1, _, _, w_ih2, w_hh2, _, _, w_head, _ = saved[:10]
-        batch, steps, n = g_means.shape
+        steps = g_means.shape[1]
+        if steps == 1:  # no transition step: z_0 = w_0, P_0 = diag(r_0)
+            return (g_means, g_vars, None, None) + (None,) * 10
         n_rec, n_fil = len(StepRecord._fields), ctx.n_filter_saved
         records = [StepRecord(*saved[10 + s * n_rec: 10 + (s + 1) * n_rec]) for s in range(steps - 1)]
         start = 10 + (steps - 1) * n_rec
         filter_saved = [saved[start + s * n_fil: start + (s + 1) * n_fil] for s in range(steps - 1)]
-        if steps == 1:  # no transition step: z_0 = w_0, P_0 = diag(r_0)
-            return (g_means, g_vars, None, None) + (None,) * 10
-        g_w, g_r = torch.empty_like(g_means), torch.empty_like(g_vars)
-        # pre-activation gradients of every step (cell 1, cell 2, head), for the weight gradients
-        d_gates1 = g_means.new_empty(steps - 1, batch, 4 * ctx.hidden)
-        d_gates2 = torch.empty_like(d_gates1)
-        d_head = g_means.new_empty(steps - 1, batch, n * n + n)
-        g_z, g_P = g_means[:, -1], torch.diag_embed(g_vars[:, -1])
-        dh1 = dc1 = dh2 = dc2 = g_means.new_zeros(batch, ctx.hidden)  # from step t + 1
-        for t in range(steps - 1, 0, -1):
-            rec, s = records[t - 1], t - 1
-            g_z_prev, g_P_prev, g_F, g_q, g_w[:, t], g_r[:, t] = fused_step_backward(
-                filter_saved[s], g_z, g_P, None)
-            d_head[s, :, : n * n] = g_F.view(batch, n * n)
-            # q = ELU(x) + 1 + floor: slope 1 for x > 0, exp(x) = ELU(x) + 1 otherwise
-            torch.mul(g_q, torch.where(rec.q_pre > 0, 1.0, rec.q_pre.exp()), out=d_head[s, :, n * n:])
-            dh2 = torch.addmm(dh2, d_head[s], w_head)
-            dc2 = lstm_cell_backward(dh2, dc2, rec.act2, rec.tanh_c2, rec.c2_prev, out=d_gates2[s])
-            dh1 = torch.addmm(dh1, d_gates2[s], w_ih2)
-            dh2 = d_gates2[s] @ w_hh2
-            dc1 = lstm_cell_backward(dh1, dc1, rec.act1, rec.tanh_c1, rec.c1_prev, out=d_gates1[s])
-            dh1 = d_gates1[s] @ w_hh1
-            g_z = torch.addmm(g_z_prev, d_gates1[s], w_ih1).add_(g_means[:, s])
-            g_P = g_P_prev
-            g_P.diagonal(dim1=-2, dim2=-1).add_(g_vars[:, s])
-        g_w[:, 0] = g_z
-        g_r[:, 0] = g_P.diagonal(dim1=-2, dim2=-1)
-
-        def rows(name):  # one StepRecord field over all steps: ((T-1) B, k)
-            return torch.stack([getattr(rec, name) for rec in records]).flatten(0, 1)
-
-        dg1, dg2, dhead = d_gates1.flatten(0, 1), d_gates2.flatten(0, 1), d_head.flatten(0, 1)
-        db1, db2 = dg1.sum(0), dg2.sum(0)  # b_ih and b_hh enter the same sum: equal gradients
-        grads = (dg1.T @ rows("z_prev"), dg1.T @ rows("h1_prev"), db1, db1.clone(),
-                 dg2.T @ rows("h1"), dg2.T @ rows("h2_prev"), db2, db2.clone(),
-                 dhead.T @ rows("h2"), dhead.sum(0))
-        return (g_w, g_r, None, None) + grads
+        g_w, g_r, grads = _backward_loop(g_means, g_vars, records, filter_saved, saved[:10], ctx.hidden)
+        return (g_w, g_r, None, None, *grads)
 
 
 def check_observations(w: torch.Tensor, r: torch.Tensor, latent: int) -> None:

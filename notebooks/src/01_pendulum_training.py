@@ -16,11 +16,12 @@
 # 10, the best checkpoint on validation NLL, a checkpoint every epoch from which an interrupted
 # run resumes. The paper's schedule is Adam 1e-4 for 200 epochs; it does not state the batch
 # size: we use 50 sequences. Trained on max noise 0.5, tested at 0.5 and 0.75 (out of distribution).
-# `pend_patience` (ours) ends a run that many epochs after its best validation NLL; 0 trains every
-# epoch. In the paper profile the three DRF runs were afterwards trained on to the paper's 200
-# epochs (`python -m drfkit.studies --profile paper --study pendulum --models drf --set pend_patience=0`);
-# a run past its early stop counts as finished here. Where a run was trained (CPU, or a GPU when one
-# was lent) is recorded per epoch in the training curves.
+# `pend_patience` (ours) ends a run that many epochs after its best validation NLL; 0, the paper
+# profile's value, trains every epoch. The paper runs first trained with patience 50 and were then
+# continued from their last checkpoints to the full 200 epochs
+# (`python -m drfkit.studies --profile paper --study pendulum --models M --seeds N --set pend_patience=0`);
+# no selected checkpoint changed. Where a run was trained (CPU, or a GPU when one was lent) is recorded
+# per epoch in the training curves.
 
 # %% tags=["parameters"]
 
@@ -76,7 +77,8 @@ plt.show()
 # ## Model selection
 # The evaluated checkpoint of each run is its best epoch on validation NLL. The audit lists, per run,
 # the best epoch, the final validation NLL and the longest wait between two successive improvements;
-# when every wait is far below `pend_patience`, the early stop ended no run that was still improving.
+# with an early stop (`pend_patience` > 0), waits far below the patience mean it ended no run that was
+# still improving.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
