@@ -373,10 +373,8 @@ def fused_step_backward(saved, g_z, g_P, g_K_out, symmetric: bool = False, out_F
         return (None,) * 6
     g_q = H.diagonal(dim1=-2, dim2=-1).clone()
     HF = H @ F
-    if symmetric and out_F is not None:  # H F (P + P^T) = 2 H F P
-        g_F = torch.baddbmm(out_F, HF, P, beta=0, alpha=2, out=out_F)
-    elif symmetric:
-        g_F = torch.bmm(HF, P).mul_(2)
+    if symmetric:  # H F (P + P^T) = 2 H F P (beta=0: the first argument is ignored)
+        g_F = torch.baddbmm(HF, HF, P, beta=0, alpha=2, out=out_F)
     else:
         g_F = torch.bmm(HF, P + P.mT, out=out_F)
     g_Pin = F.mT @ HF
