@@ -194,6 +194,11 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                       f"target ≤ 1.5×"
                       + (f"; {sp.loc['drf_per_step', 'ratio_to_no_dynamics']:.2f}× when autograd differentiates the "
                          f"filter step by step instead of the one-node recursion" if "drf_per_step" in sp.index else "")
+                      + (f"; its counted arithmetic is {sp.loc['drf', 'flop_ratio_to_no_dynamics']:.2f}× a "
+                         f"no_dynamics step's ({sp.loc['drf', 'gflop']:.3g} against {sp.loc['no_dynamics', 'gflop']:.3g} "
+                         f"GFLOP of matrix products and convolutions), run at "
+                         f"{sp.loc['drf', 'gflop_per_s'] / sp.loc['no_dynamics', 'gflop_per_s']:.2f}× its rate"
+                         if "flop_ratio_to_no_dynamics" in sp else "")
                       + "; `tables/pendulum_training_speed.csv`).", ""]
     if link_figures:
         for name, caption in HEADLINE_FIGURES:

@@ -6,7 +6,9 @@ Two studies:
 ``training_step_times`` measures one optimisation step (forward, loss, backward) of
 each model on the same batch, from which seconds per epoch follow. The models are timed
 in interleaved rounds (``interleaved_times``), and a ratio is the median of the per-round
-ratios: a slow spell of a shared machine then hits both sides of a ratio alike.
+ratios: a slow spell of a shared machine then hits both sides of a ratio alike. Asked to,
+it also counts each step's arithmetic (``count_flops``), which says what a time ratio
+could be at equal arithmetic rates: the floor below which only a faster rate helps.
 
 ``inference_benchmark`` measures the cost of a prediction *with uncertainty* for one new
 frame per pedestrian (or pendulum), after keypoint extraction -- the paper's Table
@@ -139,10 +141,25 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, bl
     return per_call
 
 
+def count_flops(fn: Callable[[], Any]) -> int:
+    """Floating point operations of one call of ``fn``, as ``torch.utils.flop_counter``
+    counts them: matrix products and convolutions, forward and backward (2 per
+    multiply-add). Not counted: LAPACK calls (the filter's Cholesky factor and inverse),
+    elementwise ops, and fused kernels without a FLOP formula (the CPU LSTM layer's oneDNN
+    kernel), so the count is a lower bound of the work done."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    counter = FlopCounterMode(display=False)
+    with counter:
+        fn()
+    return int(counter.get_total_flops())
+
+
 def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor, targets: torch.Tensor,
                         n_batches_per_epoch: int, min_run_time: float = 1.0,
                         threads: int | None = None, seed: int = 0, min_rounds: int = 5,
-                        model_attrs: dict[str, dict[str, Any]] | None = None) -> pd.DataFrame:
+                        model_attrs: dict[str, dict[str, Any]] | None = None,
+                        with_flops: bool = False) -> pd.DataFrame:
     """Median seconds of one training step per model, and the implied seconds per epoch.
 
     configs: name -> model config; inputs (B, T, ...) and targets (B, T, out): one batch.
@@ -152,6 +169,9 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
     seconds each, at ``threads``). Returns columns model, batch, frames, threads, rounds,
     step_median_s, step_iqr_s (over rounds), epoch_s, and ratio_to_<first model>: the median
     over rounds of this model's step time over the first model's in the same round.
+    ``with_flops`` adds gflop (one step's :func:`count_flops`, in 1e9), gflop_per_s (at the
+    median step time) and flop_ratio_to_<first model>: the time ratio the models would
+    have if both ran their counted arithmetic at the same rate.
     """
     from drfkit.models import build_model
 
@@ -172,6 +192,7 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
             return torch.autograd.grad(loss, params, allow_unused=True)
 
         steps[name] = step
+    flops = {name: count_flops(step) for name, step in steps.items()} if with_flops else {}
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
@@ -187,6 +208,9 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
                      "threads": threads, "rounds": len(t), "step_median_s": float(np.median(t)),
                      "step_iqr_s": float(q3 - q1), "epoch_s": float(np.median(t)) * n_batches_per_epoch,
                      f"ratio_to_{base}": float(np.median(t / np.asarray(times[base])))})
+        if with_flops:
+            rows[-1].update({"gflop": flops[name] / 1e9, "gflop_per_s": flops[name] / 1e9 / float(np.median(t)),
+                             f"flop_ratio_to_{base}": flops[name] / flops[base]})
     return pd.DataFrame(rows)
 
 

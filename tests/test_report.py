@@ -46,6 +46,13 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
         tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
     assert "target ≤ 1.5×; 1.78× when autograd differentiates the filter step by step" in \
         results_section("p", "make reproduce", False)
+    assert "counted arithmetic" not in results_section("p", "make reproduce", False)  # no FLOP columns yet
+    speed = pd.read_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv", index_col=0)
+    speed["gflop"], speed["flop_ratio_to_no_dynamics"] = [7.5, 12.0, 12.0], [1.0, 1.6, 1.6]
+    speed["gflop_per_s"] = speed["gflop"] / speed["step_median_s"]  # 15 and 15: the same rate
+    speed.to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
+    assert ("; its counted arithmetic is 1.60× a no_dynamics step's (12 against 7.5 GFLOP of matrix products "
+            "and convolutions), run at 1.00× its rate;") in results_section("p", "make reproduce", False)
 
 
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):

@@ -199,6 +199,37 @@ def test_training_step_times_still_reports_epochs():
     assert speed["ratio_to_no_dynamics"].iloc[0] == 1.0 and (speed["step_median_s"] > 0).all()
 
 
+def test_count_flops_of_known_products():
+    a, b = torch.randn(3, 4), torch.randn(4, 5)
+    assert timing.count_flops(lambda: a @ b) == 2 * 3 * 4 * 5
+    A, B = torch.randn(6, 3, 4), torch.randn(6, 4, 5)
+    assert timing.count_flops(lambda: (A @ B, a + a)) == 6 * 2 * 3 * 4 * 5  # elementwise ops are not counted
+    w = torch.randn(5, 4, requires_grad=True)  # backward of x w^T: dL/dw = g^T x, one more product
+    assert timing.count_flops(lambda: torch.autograd.grad((a @ w.T).sum(), w)) == 2 * (2 * 3 * 4 * 5)
+
+
+def test_training_step_flops_count_the_filter_recursion():
+    from drfkit.models import default_config
+
+    configs = {k: default_config(k, "pendulum", 2) for k in ("no_dynamics", "drf")}
+    inputs = example_frames("pendulum", 3, 4)
+    targets = torch.rand(3, 4, 2)
+    plain = timing.training_step_times(configs, inputs, targets, n_batches_per_epoch=1, min_run_time=0.01,
+                                       min_rounds=2, threads=1)
+    assert "gflop" not in plain  # counting is asked for, not done by default
+    speed = timing.training_step_times(configs, inputs, targets, n_batches_per_epoch=1, min_run_time=0.01,
+                                       min_rounds=2, threads=1, with_flops=True).set_index("model")
+    nd, drf = speed.loc["no_dynamics"], speed.loc["drf"]
+    assert nd["flop_ratio_to_no_dynamics"] == 1.0
+    assert drf["flop_ratio_to_no_dynamics"] == pytest.approx(drf["gflop"] / nd["gflop"])
+    assert drf["gflop_per_s"] == pytest.approx(drf["gflop"] / drf["step_median_s"])
+    # the DRF shares the encoder, heads and decoder; on top, per filter step (3 here) its forward
+    # alone runs five batched n x n products (two for F P F^T, three for the Joseph form)
+    n, batch, filter_steps = configs["drf"]["latent"], 3, 3
+    extra = (drf["gflop"] - nd["gflop"]) * 1e9
+    assert extra > filter_steps * 5 * batch * 2 * n ** 3
+
+
 def test_interleaved_times_rotates_the_order_and_times_every_fn_each_round():
     import time as _time
 
