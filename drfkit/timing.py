@@ -167,8 +167,9 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
     to time a DRF that differentiates its per-step loop with autograd (attributes must exist).
     The models are timed in interleaved rounds (``interleaved_times``, about ``min_run_time``
     seconds each, at ``threads``). Returns columns model, batch, frames, threads, rounds,
-    step_median_s, step_iqr_s (over rounds), epoch_s, and ratio_to_<first model>: the median
-    over rounds of this model's step time over the first model's in the same round.
+    step_median_s, step_iqr_s (over rounds), epoch_s, ratio_to_<first model>: the median
+    over rounds of this model's step time over the first model's in the same round, and
+    ratio_to_<first model>_iqr: the interquartile range of those per-round ratios.
     ``with_flops`` adds gflop (one step's :func:`count_flops`, in 1e9), gflop_per_s (at the
     median step time) and flop_ratio_to_<first model>: the time ratio the models would
     have if both ran their counted arithmetic at the same rate.
@@ -207,7 +208,8 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
         rows.append({"model": name, "batch": int(inputs.shape[0]), "frames": int(inputs.shape[1]),
                      "threads": threads, "rounds": len(t), "step_median_s": float(np.median(t)),
                      "step_iqr_s": float(q3 - q1), "epoch_s": float(np.median(t)) * n_batches_per_epoch,
-                     f"ratio_to_{base}": float(np.median(t / np.asarray(times[base])))})
+                     f"ratio_to_{base}": float(np.median(t / np.asarray(times[base]))),
+                     f"ratio_to_{base}_iqr": float(np.subtract(*np.quantile(t / np.asarray(times[base]), [0.75, 0.25])))})
         if with_flops:
             rows[-1].update({"gflop": flops[name] / 1e9, "gflop_per_s": flops[name] / 1e9 / float(np.median(t)),
                              f"flop_ratio_to_{base}": flops[name] / flops[base]})

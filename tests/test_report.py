@@ -53,6 +53,10 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
     speed.to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
     assert ("; its counted arithmetic is 1.60× a no_dynamics step's (12 against 7.5 GFLOP of matrix products "
             "and convolutions), run at 1.00× its rate;") in results_section("p", "make reproduce", False)
+    speed["ratio_to_no_dynamics_iqr"] = [0.0, 0.04, 0.05]
+    speed.to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
+    assert "costs **1.61×** a no_dynamics step (per-round IQR 0.04; 0.8 s against 0.5 s; target" in \
+        results_section("p", "make reproduce", False)
 
 
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):

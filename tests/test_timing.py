@@ -256,6 +256,7 @@ def test_training_step_ratio_is_the_median_of_per_round_ratios(monkeypatch):
                                        n_batches_per_epoch=2, min_run_time=0.01, threads=1)
     row = speed.set_index("model").loc["drf"]
     assert row["ratio_to_no_dynamics"] == 2.0 and row["step_median_s"] == 5.0 and row["rounds"] == 5
+    assert row["ratio_to_no_dynamics_iqr"] == pytest.approx(3.0 - 1.0)  # quartiles of 5, 1, 1, 3, 2
     assert row["epoch_s"] == 10.0 and row["step_iqr_s"] == pytest.approx(10.0 - 3.0)
 
 
