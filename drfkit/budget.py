@@ -50,6 +50,8 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
     together in interleaved rounds (``timing.training_step_times``), so ``step_ratio``, a
     model's step over ``ratio_to``'s (no_dynamics where it is in the group) as the median of
     per-round ratios, is measured in one run and robust to a slow spell of the machine.
+    ``flop_ratio`` is the same ratio for the step's counted arithmetic (``timing.count_flops``):
+    what ``step_ratio`` would be if both models ran their products at the same rate.
     """
     rows = []
     for study in ("pendulum", "pedestrians"):
@@ -63,7 +65,8 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
             data = train.frames() if framewise else train
             batch = min(batch_size, len(data))
             step = training_step_times({k: studies.model_config(study, k, P) for k in kinds}, data.inputs[:batch],
-                                       data.targets[:batch], n_batches_per_epoch=1, min_run_time=min_run_time)
+                                       data.targets[:batch], n_batches_per_epoch=1, min_run_time=min_run_time,
+                                       with_flops=True)
             ratio = f"ratio_to_{kinds[0]}"
             for kind, s in zip(kinds, step.itertuples()):
                 cfg = configs[kind]
@@ -74,6 +77,7 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
                 rows.append({"study": study, "model": kind, "batch": batch,
                              "frames_per_item": int(data.inputs.shape[1]), "step_s": step_s,
                              "step_ratio": float(getattr(s, ratio)), "ratio_to": kinds[0], "rounds": int(s.rounds),
+                             "flop_ratio": float(getattr(s, f"flop_{ratio}")),
                              "batches_per_epoch": batches, "epoch_s": step_s * batches, "epochs": cfg.epochs,
                              "seeds": len(P.seeds), "hours": hours, "epochs_done": done,
                              "hours_left": hours * left / (cfg.epochs * len(P.seeds)),

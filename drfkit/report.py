@@ -171,15 +171,19 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
             b["epochs_done"], b["hours_left"] = 0, b["hours"]
         if "step_ratio" not in b:  # written before models were timed together
             b["step_ratio"], b["ratio_to"] = np.nan, ""
+        if "flop_ratio" not in b:  # written before steps were counted
+            b["flop_ratio"] = np.nan
         lines += [f"Training cost of this profile on this machine, measured by `python -m drfkit.budget --profile "
                   f"{profile}` (one training step per model, scaled by batches, epochs and seeds, "
                   f"{int(b['threads'].iloc[0])} torch thread(s); models sharing batches timed in interleaved rounds, "
-                  f"the step ratio is the median of per-round ratios): **{b['hours'].sum():.1f} hours** in all, "
+                  f"the step ratio is the median of per-round ratios, the FLOP ratio that of the step's counted "
+                  f"matrix products and convolutions): **{b['hours'].sum():.1f} hours** in all, "
                   f"**{b['hours_left'].sum():.1f} hours left** after the epochs already in `results/{profile}/models/`.",
-                  "", "| study | model | s / epoch | step ratio | epochs × seeds | epochs done | hours | hours left |",
-                  "|---|---|---|---|---|---|---|---|"]
+                  "", "| study | model | s / epoch | step ratio | FLOP ratio | epochs × seeds | epochs done | hours "
+                  "| hours left |", "|---|---|---|---|---|---|---|---|---|"]
         lines += [f"| {r.study} | {r.model} | {r.epoch_s:.3g} | "
                   + (f"{r.step_ratio:.2f}× {r.ratio_to}" if pd.notna(r.step_ratio) else "") + " | "
+                  + (f"{r.flop_ratio:.2f}×" if pd.notna(r.flop_ratio) else "") + " | "
                   f"{r.epochs} × {r.seeds} | {r.epochs_done} | {r.hours:.2f} | {r.hours_left:.2f} |"
                   for r in b.itertuples()]
         lines.append("")

@@ -51,6 +51,7 @@ import numpy as np
 import pandas as pd
 import torch
 import torch.utils.benchmark as benchmark
+from torch.utils.flop_counter import FlopCounterMode, register_flop_formula
 from torch.utils.benchmark.utils.timer import timer as synchronised_clock
 
 # study -> (input kind, out_dim, models); the pedestrian study is the one the paper times.
@@ -141,14 +142,29 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, bl
     return per_call
 
 
+@register_flop_formula(torch.ops.aten.mkldnn_rnn_layer)
+def _lstm_layer_flops(input_shape, weight0_shape, weight1_shape, *args, **kwargs) -> int:
+    """One oneDNN LSTM layer over a sequence (what ``nn.LSTM`` runs on the CPU, and torch's
+    FLOP counter has no formula for): per frame and item, the gate products W_ih x (4H x in)
+    and W_hh h (4H x H), as ``nn.LSTMCell``'s two linears count them."""
+    gates, inputs = weight0_shape
+    frames = math.prod(input_shape) // inputs  # T * B, whichever of the two comes first
+    return 2 * frames * gates * (inputs + weight1_shape[1])
+
+
+@register_flop_formula(torch.ops.aten.mkldnn_rnn_layer_backward)
+def _lstm_layer_backward_flops(input_shape, weight1_shape, weight2_shape, *args, **kwargs) -> int:
+    """Its backward: the same products for dL/dx and dL/dh, and again for the weights'
+    gradients, twice the forward (the arguments are numbered from weight1 here)."""
+    return 2 * _lstm_layer_flops(input_shape, weight1_shape, weight2_shape)
+
+
 def count_flops(fn: Callable[[], Any]) -> int:
     """Floating point operations of one call of ``fn``, as ``torch.utils.flop_counter``
-    counts them: matrix products and convolutions, forward and backward (2 per
-    multiply-add). Not counted: LAPACK calls (the filter's Cholesky factor and inverse),
-    elementwise ops, and fused kernels without a FLOP formula (the CPU LSTM layer's oneDNN
-    kernel), so the count is a lower bound of the work done."""
-    from torch.utils.flop_counter import FlopCounterMode
-
+    counts them: matrix products, convolutions and (formula above) the CPU LSTM layer,
+    forward and backward (2 per multiply-add). Not counted: LAPACK calls (the filter's
+    Cholesky factor and inverse) and elementwise ops, so the count is a lower bound of the
+    work done."""
     counter = FlopCounterMode(display=False)
     with counter:
         fn()

@@ -24,6 +24,9 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
     pend_rows = table[table["study"] == "pendulum"].set_index("model")
     assert (pend_rows["ratio_to"] == "no_dynamics").all() and pend_rows.loc["no_dynamics", "step_ratio"] == 1.0
     assert (pend_rows["rounds"] >= 5).all() and (pend_rows["step_ratio"] > 0).all()
+    # the DRF and the LSTM do the no_dynamics step's products and those of their recursion
+    assert pend_rows.loc["no_dynamics", "flop_ratio"] == 1.0
+    assert pend_rows.loc["drf", "flop_ratio"] > pend_rows.loc["lstm", "flop_ratio"] > 1.0
     mono = table[table["model"] == "monoloco"].iloc[0]
     assert mono["ratio_to"] == "monoloco" and mono["step_ratio"] == 1.0  # timed alone (single frames)
     assert mono["frames_per_item"] == 1 and mono["epochs"] == values["monoloco_epochs"]  # single frames

@@ -20,7 +20,7 @@ def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monke
     text = results_section("p", "make reproduce", False)
     assert "last pipeline run: 03_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
     assert "| C6 |" in text and "Not evaluated yet in this profile: C1" in text
-    assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 |  | 200 × 3 | 300 |" in text
+    assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 |  |  | 200 × 3 | 300 |" in text
     assert "Pendulum training speed" not in text  # no notebook 01 table yet
 
 
@@ -38,7 +38,10 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
                   {"model": "drf", "batch": 50, "frames": 75, "threads": 2, "step_median_s": 0.8,
                    "ratio_to_no_dynamics": 1.61}]).to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
     text = results_section("p", "make reproduce", False)
-    assert "| pendulum | drf | 29 | 1.46× no_dynamics | 200 × 3 |" in text
+    assert "| pendulum | drf | 29 | 1.46× no_dynamics |  | 200 × 3 |" in text  # counted before FLOPs were
+    budget = pd.read_csv(tmp_path / "p" / "training_budget.csv", index_col=0).assign(flop_ratio=[1.0, 1.614])
+    budget.to_csv(tmp_path / "p" / "training_budget.csv")
+    assert "| pendulum | drf | 29 | 1.46× no_dynamics | 1.61× | 200 × 3 |" in results_section("p", "make reproduce", False)
     assert "(one run, 2 torch thread(s), batch 50 × 75 frames): a DRF step costs **1.61×** a no_dynamics step" in text
     assert "step by step" not in text  # no per-step row in that table
     speed = pd.read_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv", index_col=0)

@@ -125,9 +125,9 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 #
 # A time ratio mixes two things: how much arithmetic each step does, and how fast it runs. So each
 # step's arithmetic is also counted (`drfkit.timing.count_flops`: the matrix products and
-# convolutions of forward and backward, as `torch.utils.flop_counter` counts them; not the
-# filter's Cholesky factor and inverse, nor elementwise ops, nor the LSTM baseline's fused oneDNN
-# layer, so `gflop` is a lower bound and the LSTM's is not comparable). `flop_ratio_to_no_dynamics`
+# convolutions of forward and backward, as `torch.utils.flop_counter` counts them, and the CPU
+# LSTM layer by a formula drfkit adds; not the filter's Cholesky factor and inverse, nor
+# elementwise ops, so `gflop` is a lower bound of the work). `flop_ratio_to_no_dynamics`
 # is the time ratio the DRF would have if it ran its counted arithmetic at the no_dynamics step's
 # rate. The DRF does all of the no_dynamics step's work (encoder, heads, decoder) plus the
 # recursion: per step and sequence, two LSTM cells, a 64 → 930 head and the filter's batched 30 × 30
