@@ -221,11 +221,12 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
     for name, per_round in times.items():
         t = np.asarray(per_round)
         q1, q3 = np.quantile(t, [0.25, 0.75])
+        per_round_ratio = t / np.asarray(times[base])
         rows.append({"model": name, "batch": int(inputs.shape[0]), "frames": int(inputs.shape[1]),
                      "threads": threads, "rounds": len(t), "step_median_s": float(np.median(t)),
                      "step_iqr_s": float(q3 - q1), "epoch_s": float(np.median(t)) * n_batches_per_epoch,
-                     f"ratio_to_{base}": float(np.median(t / np.asarray(times[base]))),
-                     f"ratio_to_{base}_iqr": float(np.subtract(*np.quantile(t / np.asarray(times[base]), [0.75, 0.25])))})
+                     f"ratio_to_{base}": float(np.median(per_round_ratio)),
+                     f"ratio_to_{base}_iqr": float(np.subtract(*np.quantile(per_round_ratio, [0.75, 0.25])))})
         if with_flops:
             rows[-1].update({"gflop": flops[name] / 1e9, "gflop_per_s": flops[name] / 1e9 / float(np.median(t)),
                              f"flop_ratio_to_{base}": flops[name] / flops[base]})

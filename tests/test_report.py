@@ -38,7 +38,7 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
                   {"model": "drf", "batch": 50, "frames": 75, "threads": 2, "step_median_s": 0.8,
                    "ratio_to_no_dynamics": 1.61}]).to_csv(tmp_path / "p" / "tables" / "pendulum_training_speed.csv")
     text = results_section("p", "make reproduce", False)
-    assert "| pendulum | drf | 29 | 1.46× no_dynamics |  | 200 × 3 |" in text  # counted before FLOPs were
+    assert "| pendulum | drf | 29 | 1.46× no_dynamics |  | 200 × 3 |" in text  # a budget written before FLOPs were counted
     budget = pd.read_csv(tmp_path / "p" / "training_budget.csv", index_col=0).assign(flop_ratio=[1.0, 1.614])
     budget.to_csv(tmp_path / "p" / "training_budget.csv")
     assert "| pendulum | drf | 29 | 1.46× no_dynamics | 1.61× | 200 × 3 |" in results_section("p", "make reproduce", False)

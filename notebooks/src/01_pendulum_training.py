@@ -118,10 +118,11 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # measured in one run in interleaved rounds (`drfkit.timing.training_step_times`: each round times
 # every model in turn, so a slow spell of the machine hits all of them); seconds per epoch follow
 # from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios
-# (at least 15 rounds; `ratio_to_no_dynamics_iqr` is their interquartile range). The target is a DRF epoch at most 1.5× a no_dynamics epoch, at the
-# notebook's thread count. In training the DRF's recursion runs as one autograd node with a
-# hand-written backward (`drfkit.models.recursion`; the tests check it against autograd);
-# `drf_per_step` is the same model differentiated step by step by autograd, for comparison.
+# (at least 15 rounds; `ratio_to_no_dynamics_iqr` is their interquartile range). The target is a
+# DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count. In training the DRF's
+# recursion runs as one autograd node with a hand-written backward (`drfkit.models.recursion`; the
+# tests check it against autograd); `drf_per_step` is the same model differentiated step by step
+# by autograd, for comparison.
 #
 # A time ratio mixes two things: how much arithmetic each step does, and how fast it runs. So each
 # step's arithmetic is also counted (`drfkit.timing.count_flops`: the matrix products and
