@@ -137,6 +137,21 @@ HEADLINE_FIGURES = [
 ]
 
 
+def recursion_scaling_line(scaling: pd.DataFrame) -> str:
+    """One sentence per thread count of a ``drfkit.timing.recursion_scaling`` table (notebook 01)."""
+    parts = []
+    for threads, rows in scaling.groupby("threads"):
+        step = rows[(rows["model"] == "drf") & (rows["part"] == "step")].iloc[0]
+        rec = rows[(rows["part"] == "recursion") & (rows["batch"] == step["batch"])].iloc[0]
+        parts.append(f"at {int(threads)} thread(s) the recursion takes {1e3 * rec['median_s']:.0f} ms at batch "
+                     f"{int(step['batch'])}, {1e3 * step['fixed_s']:.0f} ms of it per-call cost (the intercept of its "
+                     f"time against the batch), and without that cost the DRF step would cost "
+                     f"**{step['floor_ratio']:.2f}×** a no_dynamics step instead of {step['ratio']:.2f}×")
+    return ("Per-call cost or arithmetic, in notebook 01 (the recursion alone at half, one and two times the batch, "
+            "in one run with both training steps): " + "; ".join(parts)
+            + " (`tables/pendulum_recursion_scaling.csv`, `figures/pendulum_recursion_scaling.png`).")
+
+
 def results_section(profile: str, command: str, link_figures: bool) -> str:
     """The README's results section for ``profile``, built from its claims.md and manifest."""
     import json
@@ -205,6 +220,9 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                       f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
                       f"costs **{drf['ratio_to_no_dynamics']:.2f}×** a no_dynamics step ("
                       + "; ".join(notes) + "; `tables/pendulum_training_speed.csv`).", ""]
+    scaling = root / "tables" / "pendulum_recursion_scaling.csv"
+    if scaling.exists():
+        lines += [recursion_scaling_line(pd.read_csv(scaling)), ""]
     if link_figures:
         for name, caption in HEADLINE_FIGURES:
             png = root / "figures" / f"{name}.png"

@@ -142,6 +142,106 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, bl
     return per_call
 
 
+def fit_fixed_and_per_item(sizes, seconds) -> tuple[float, float]:
+    """Least-squares line seconds = fixed + per_item * size over >= 2 distinct sizes:
+    (fixed, per_item)."""
+    sizes, seconds = np.asarray(sizes, dtype=float), np.asarray(seconds, dtype=float)
+    if sizes.shape != seconds.shape or len(np.unique(sizes)) < 2:
+        raise ValueError(f"need seconds at >= 2 distinct sizes, got sizes {sizes.tolist()} "
+                         f"and {seconds.size} times")
+    per_item, fixed = np.polyfit(sizes, seconds, 1)
+    return float(fixed), float(per_item)
+
+
+def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], inputs: torch.Tensor,
+                      targets: torch.Tensor, sizes: tuple[int, ...] | None = None, min_run_time: float = 1.0,
+                      threads: int | None = None, seed: int = 0, min_rounds: int = 5) -> pd.DataFrame:
+    """How much of the DRF step's extra time is per-call cost, and what is left without it.
+
+    Times in one interleaved run (``interleaved_times``, at ``threads``): a training step
+    of the base model and of the DRF on ``inputs`` (B, T, ...) and ``targets`` (B, T, out),
+    and the DRF's recursion alone (``drf_recursion`` forward and backward, unit upstream
+    gradients) on the DRF's encoder outputs for these inputs, tiled to each batch size of
+    ``sizes`` (default (B // 2, B, 2 B); B is always added). A least-squares line
+    t(b) = fixed + per_sequence * b through the recursion's median times splits it into a
+    part that does not grow with the batch -- the interpreter's and the dispatcher's cost of
+    the recursion's hundreds of small ops per step, LAPACK's per-call setup -- and a part
+    that does: the arithmetic and memory traffic of b sequences, with torch's kernels as
+    they run at this thread count.
+
+    ``floor_ratio`` (DRF step row) is the median over rounds of
+    (drf_step - recursion(B) + per_sequence * B) / base_step: the DRF/base step ratio if the
+    recursion's fixed part were gone and its kernels ran as fast as now -- what a compiled
+    recursion calling the same kernels could reach at best. ``ratio`` is the plain median of
+    per-round DRF/base step ratios of the same run.
+
+    Returns rows (model, part) = (base kind, 'step'), ('drf', 'step') and ('drf', 'recursion')
+    per size, with columns batch, frames, threads, rounds, median_s, iqr_s, fit_s (recursion
+    rows), fixed_s, per_sequence_s, ratio and floor_ratio (DRF step row; NaN elsewhere).
+    """
+    from drfkit.models import build_model
+    from drfkit.models.recursion import drf_recursion
+
+    batch = int(inputs.shape[0])
+    if targets.shape[0] != batch:
+        raise ValueError(f"inputs and targets disagree on the batch: {batch} and {targets.shape[0]}")
+    sizes = sorted({batch, *(sizes if sizes is not None else (batch // 2, 2 * batch))} - {0})
+    if any(isinstance(b, bool) or not isinstance(b, int) or b < 1 for b in sizes) or len(sizes) < 2:
+        raise ValueError(f"sizes must hold positive ints giving >= 2 distinct batch sizes with B = {batch}, "
+                         f"got {sizes}")
+    torch.manual_seed(seed)
+    base, drf = build_model(base_config).train(), build_model(drf_config).train()
+    if drf.kind != "drf":
+        raise ValueError(f"drf_config must build a DRF, got kind {drf.kind!r}")
+
+    def train_step(model):
+        params = list(model.parameters())
+
+        def step():
+            mean, sigma = model(inputs)
+            return torch.autograd.grad(model.loss(mean, sigma, targets, None), params, allow_unused=True)
+        return step
+
+    with torch.no_grad():
+        w, r = drf.observe(inputs)  # (B, T, n) each: realistic observations for the filter
+    weights = list(drf.transition.parameters())
+
+    def recursion(b):
+        reps = -(-b // batch)
+        w_b = w.repeat(reps, 1, 1)[:b].clone().requires_grad_()
+        r_b = r.repeat(reps, 1, 1)[:b].clone().requires_grad_()
+        ones = torch.ones_like(w_b)
+
+        def run():
+            z, p = drf_recursion(drf.transition, w_b, r_b)
+            return torch.autograd.grad((z, p), [w_b, r_b, *weights], (ones, ones))
+        return run
+
+    fns = {"base": train_step(base), "drf": train_step(drf)} | {f"recursion_{b}": recursion(b) for b in sizes}
+    previous = torch.get_num_threads()
+    threads = threads or previous
+    torch.set_num_threads(threads)
+    try:
+        times = {k: np.asarray(v) for k, v in
+                 interleaved_times(fns, min_run_time, block_s=0.0, min_rounds=min_rounds).items()}
+    finally:
+        torch.set_num_threads(previous)
+    medians = {k: float(np.median(v)) for k, v in times.items()}
+    fixed, per_sequence = fit_fixed_and_per_item(sizes, [medians[f"recursion_{b}"] for b in sizes])
+    floor = (times["drf"] - times[f"recursion_{batch}"] + per_sequence * batch) / times["base"]
+    rows = []
+    for key, model, part, b in ([("base", base.kind, "step", batch), ("drf", "drf", "step", batch)]
+                                + [(f"recursion_{b}", "drf", "recursion", b) for b in sizes]):
+        q1, q3 = np.quantile(times[key], [0.25, 0.75])
+        rows.append({"model": model, "part": part, "batch": b, "frames": int(inputs.shape[1]),
+                     "threads": threads, "rounds": len(times[key]), "median_s": medians[key],
+                     "iqr_s": float(q3 - q1), "fit_s": fixed + per_sequence * b if part == "recursion" else np.nan,
+                     "fixed_s": fixed, "per_sequence_s": per_sequence,
+                     "ratio": float(np.median(times["drf"] / times["base"])) if key == "drf" else np.nan,
+                     "floor_ratio": float(np.median(floor)) if key == "drf" else np.nan})
+    return pd.DataFrame(rows)
+
+
 @register_flop_formula(torch.ops.aten.mkldnn_rnn_layer)
 def _lstm_layer_flops(input_shape, weight0_shape, weight1_shape, *args, **kwargs) -> int:
     """One oneDNN LSTM layer over a sequence (what ``nn.LSTM`` runs on the CPU, and torch's

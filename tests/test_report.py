@@ -62,6 +62,27 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
         results_section("p", "make reproduce", False)
 
 
+def test_results_section_reports_the_recursion_scaling_per_thread_count(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    claims.upsert("p", [claims.c6_speedup(3.0)])
+    (tmp_path / "p" / "tables").mkdir()
+    assert "Per-call cost" not in results_section("p", "make reproduce", False)
+    rows = []
+    for threads, fixed, floor in ((1, 0.028, 1.51), (2, 0.036, 1.53)):
+        common = {"frames": 75, "threads": threads, "fixed_s": fixed, "per_sequence_s": 0.0015}
+        rows += [{**common, "model": "no_dynamics", "part": "step", "batch": 50, "median_s": 0.15},
+                 {**common, "model": "drf", "part": "step", "batch": 50, "median_s": 0.27, "ratio": 1.75,
+                  "floor_ratio": floor},
+                 {**common, "model": "drf", "part": "recursion", "batch": 25, "median_s": 0.07},
+                 {**common, "model": "drf", "part": "recursion", "batch": 50, "median_s": 0.108}]
+    pd.DataFrame(rows).to_csv(tmp_path / "p" / "tables" / "pendulum_recursion_scaling.csv", index=False)
+    text = results_section("p", "make reproduce", False)
+    assert ("at 1 thread(s) the recursion takes 108 ms at batch 50, 28 ms of it per-call cost (the intercept of "
+            "its time against the batch), and without that cost the DRF step would cost **1.51×** a no_dynamics "
+            "step instead of 1.75×; at 2 thread(s)") in text
+    assert "**1.53×**" in text and "`tables/pendulum_recursion_scaling.csv`" in text
+
+
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     claims.upsert("p", [claims.c6_speedup(3.0)])

@@ -299,3 +299,60 @@ def test_training_step_times_sets_model_attributes_and_rejects_unknown_ones(monk
     with pytest.raises(ValueError, match="no attribute 'whole_sequnce'"):
         timing.training_step_times({"drf": config}, inputs, targets, n_batches_per_epoch=1, min_run_time=0.01,
                                    model_attrs={"drf": {"whole_sequnce": False}})
+
+
+def test_fit_fixed_and_per_item_recovers_a_line():
+    fixed, per_item = timing.fit_fixed_and_per_item([2, 4, 8], [0.1 + 0.02 * s for s in (2, 4, 8)])
+    assert fixed == pytest.approx(0.1) and per_item == pytest.approx(0.02)
+    with pytest.raises(ValueError, match="2 distinct sizes"):
+        timing.fit_fixed_and_per_item([4, 4], [0.1, 0.2])
+
+
+def test_recursion_scaling_splits_fixed_cost_and_takes_per_round_floors(monkeypatch):
+    from drfkit.models import default_config
+
+    # recursion t(b) = 0.03 + 0.01 b exactly; per round base and drf steps
+    base, drf = np.array([0.2, 0.1, 0.4]), np.array([0.2, 0.5, 0.6])
+    rec = {b: np.array([0.03 + 0.01 * b] * 3) for b in (1, 2, 4)}
+    seen = []
+
+    def fake(fns, *a, **k):
+        seen.append(sorted(fns))
+        return {"base": base, "drf": drf} | {f"recursion_{b}": t for b, t in rec.items()}
+
+    monkeypatch.setattr(timing, "interleaved_times", fake)
+    configs = {k: default_config(k, "pendulum", 2) for k in ("no_dynamics", "drf")}
+    inputs, targets = example_frames("pendulum", 2, 3), torch.rand(2, 3, 2)
+    table = timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets, threads=1)
+    assert seen == [["base", "drf", "recursion_1", "recursion_2", "recursion_4"]]  # default sizes B/2, B, 2B
+    assert list(zip(table["model"], table["part"], table["batch"])) == [
+        ("no_dynamics", "step", 2), ("drf", "step", 2), ("drf", "recursion", 1), ("drf", "recursion", 2),
+        ("drf", "recursion", 4)]
+    assert table["fixed_s"].iloc[0] == pytest.approx(0.03) and table["per_sequence_s"].iloc[0] == pytest.approx(0.01)
+    recursion_rows = table[table["part"] == "recursion"]
+    assert np.allclose(recursion_rows["fit_s"], recursion_rows["median_s"])
+    row = table.iloc[1]
+    assert row["ratio"] == pytest.approx(1.5)  # per round 1, 5, 1.5: not the ratio of medians (2.5)
+    # per round (drf - t(2) + 0.01 * 2) / base = (drf - 0.03) / base: 0.85, 4.7, 1.425
+    assert row["floor_ratio"] == pytest.approx(1.425)
+    assert table.loc[[0, 2, 3, 4], ["ratio", "floor_ratio"]].isna().all().all()
+
+
+def test_recursion_scaling_times_the_recursion_with_its_backward(monkeypatch):
+    from drfkit.models import default_config, recursion
+
+    configs = {k: default_config(k, "pendulum", 2) for k in ("no_dynamics", "drf")}
+    inputs, targets = example_frames("pendulum", 3, 4), torch.rand(3, 4, 2)
+    batches = []
+    real = recursion.drf_recursion
+    monkeypatch.setattr(recursion, "drf_recursion", lambda tr, w, r: batches.append(w.shape[0]) or real(tr, w, r))
+    table = timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets, sizes=(2, 5),
+                                     min_run_time=0.0, min_rounds=2, threads=1)
+    assert set(batches) == {2, 3, 5}  # the step's own B = 3 is always timed
+    assert (table["median_s"] > 0).all() and table["rounds"].eq(2).all()
+    with pytest.raises(ValueError, match="must build a DRF"):
+        timing.recursion_scaling(configs["no_dynamics"], configs["no_dynamics"], inputs, targets, min_run_time=0.0)
+    with pytest.raises(ValueError, match="positive ints"):
+        timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets, sizes=(2.5,))
+    with pytest.raises(ValueError, match="disagree on the batch"):
+        timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets[:2])

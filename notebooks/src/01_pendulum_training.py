@@ -34,12 +34,13 @@ P, timer = start_notebook("01_pendulum_training", globals())
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+import torch
 
 from drfkit import studies
 from drfkit.evaluate import evaluate_study, summarise
 from drfkit.paper import PENDULUM_MAE, PENDULUM_PICP_MPIW
-from drfkit.report import (color, label, new_figure, paper_comparison, plot_mae_bars, plot_picp_mpiw, save_figure,
-                           save_table)
+from drfkit.report import (color, label, new_figure, paper_comparison, plot_mae_bars, plot_picp_mpiw,
+                           recursion_scaling_line, save_figure, save_table)
 
 # %% [markdown]
 # ## Training
@@ -158,6 +159,41 @@ print(f"counted arithmetic: {drf_row['gflop']:.2f} against {nd_row['gflop']:.2f}
 print(f"meeting 1.5x needs the DRF step at >= {drf_row['flop_ratio_to_no_dynamics'] / 1.5:.2f}x the no_dynamics "
       f"step's arithmetic rate; it runs at {drf_row['gflop_per_s'] / nd_row['gflop_per_s']:.2f}x")
 speed
+
+# %% [markdown]
+# ### Per-call cost or arithmetic?
+# The recursion runs hundreds of small ops per filter step, so part of its time is the cost of
+# issuing them (interpreter, dispatcher, LAPACK's per-call setup) and does not grow with the batch.
+# `drfkit.timing.recursion_scaling` times the recursion alone (forward and backward) at half, one
+# and two times the batch, in the same interleaved run as a training step of each model, and fits
+# a line t(b) = fixed + per-sequence · b. Its intercept is the per-call cost; its slope the work of
+# one more sequence with torch's kernels as they run now. `floor_ratio` removes the intercept from
+# the DRF step: the step ratio a recursion with no per-call cost at all, calling the same kernels,
+# would reach. It is measured at one thread and at the notebook's thread count; where it stays
+# above 1.5, trimming overhead, in Python or in a compiled loop, cannot meet the target, and only
+# faster kernels for the small products and factorisations could.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.timing import recursion_scaling
+
+scaling = pd.concat([recursion_scaling(configs["no_dynamics"], configs["drf"], train.inputs[:batch], train.targets[:batch],
+                                       min_run_time=0.5, min_rounds=15, threads=n)
+                     for n in sorted({1, torch.get_num_threads()})], ignore_index=True)
+save_table(P.profile, "pendulum_recursion_scaling", scaling)
+fig, axes = new_figure(width=4.8)
+ax = axes[0, 0]
+for n, part in scaling[scaling["part"] == "recursion"].groupby("threads"):
+    line, = ax.plot(part["batch"], 1e3 * part["median_s"], "o", label=f"{n} thread(s)")
+    grid = np.linspace(0, part["batch"].max(), 50)
+    ax.plot(grid, 1e3 * (part["fixed_s"].iloc[0] + part["per_sequence_s"].iloc[0] * grid), "--", color=line.get_color())
+ax.axvline(batch, color="gray", lw=0.8, label="training batch")
+ax.set(xlabel="sequences in the batch", ylabel="recursion, forward + backward (ms)", xlim=(0, None), ylim=(0, None),
+       title=f"DRF recursion over {train.inputs.shape[1]} frames")
+ax.legend()
+save_figure(P.profile, "pendulum_recursion_scaling", fig)
+print(recursion_scaling_line(scaling).replace("**", ""))
+scaling.round(4)
 
 # %% [markdown]
 # ## Accuracy: MAE at the training noise and out of distribution
