@@ -137,6 +137,19 @@ HEADLINE_FIGURES = [
 ]
 
 
+def epoch_times_line(epochs: pd.DataFrame) -> str:
+    """One sentence of a ``drfkit.timing.epoch_times`` table (notebook 01); the first row is the base."""
+    base = epochs["model"].iloc[0]
+    rows = epochs.set_index("model")
+    others = [f"{model} **{row[f'ratio_to_{base}']:.2f}×** (IQR {row[f'ratio_to_{base}_iqr']:.2f}; "
+              f"{row['epoch_median_s']:.3g} s)" for model, row in rows.iloc[1:].iterrows()]
+    return (f"Whole training epochs in notebook 01 (the training loop itself, validation and checkpoints "
+            f"included, {int(rows['rounds'].iloc[0])} interleaved rounds, {int(rows['threads'].iloc[0])} torch "
+            f"thread(s), {int(rows['sequences'].iloc[0])} sequences): against a {base} epoch of "
+            f"{rows.loc[base, 'epoch_median_s']:.3g} s, " + ", ".join(others) + "; target ≤ 1.5× for the DRF "
+            "(`tables/pendulum_epoch_times.csv`).")
+
+
 def recursion_scaling_line(scaling: pd.DataFrame) -> str:
     """One sentence per thread count of a ``drfkit.timing.recursion_scaling`` table (notebook 01)."""
     parts = []
@@ -220,6 +233,9 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                       f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
                       f"costs **{drf['ratio_to_no_dynamics']:.2f}×** a no_dynamics step ("
                       + "; ".join(notes) + "; `tables/pendulum_training_speed.csv`).", ""]
+    epochs = root / "tables" / "pendulum_epoch_times.csv"
+    if epochs.exists():
+        lines += [epoch_times_line(pd.read_csv(epochs)), ""]
     scaling = root / "tables" / "pendulum_recursion_scaling.csv"
     if scaling.exists():
         lines += [recursion_scaling_line(pd.read_csv(scaling)), ""]

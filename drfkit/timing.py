@@ -45,6 +45,7 @@ import argparse
 import math
 import os
 import sys
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -140,6 +141,54 @@ def interleaved_times(fns: dict[str, Callable[[], Any]], min_run_time: float, bl
                 fn()
             per_call[name].append((synchronised_clock() - start) / n)
     return per_call
+
+
+def epoch_times(configs: dict[str, dict[str, Any]], train, val, train_configs: dict[str, Any], rounds: int = 3,
+                threads: int | None = None) -> pd.DataFrame:
+    """Seconds of one whole training epoch per model, as ``drfkit.train.train_model`` runs it:
+    every batch of ``train`` (forward, loss, backward, clipping, Adam), the validation loss
+    on ``val`` and the epoch's checkpoint writes (into a temporary folder).
+
+    configs: name -> model config; train_configs: name -> its ``TrainConfig`` (batch size,
+    seed). Each of ``rounds`` rounds trains a fresh model of every config for one epoch, in
+    an order rotated per round; the time is the training loop's own epoch clock (history
+    ``seconds``: model building and the first optimiser state are outside it). Returns model,
+    threads, rounds, sequences, batch, epoch_median_s, epoch_iqr_s, ratio_to_<first model>
+    (the median over rounds of the per-round ratio) and ratio_to_<first model>_iqr.
+    """
+    import tempfile
+
+    from drfkit.train import train_model
+
+    names = list(configs)
+    if not names or set(train_configs) != set(names):
+        raise ValueError(f"configs and train_configs must name the same models, got {names} and {list(train_configs)}")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise ValueError(f"rounds must be a positive int, got {rounds!r}")
+    previous = torch.get_num_threads()
+    threads = threads or previous
+    torch.set_num_threads(threads)
+    seconds: dict[str, list[float]] = {n: [] for n in names}
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            for r in range(rounds):
+                for name in names[r % len(names):] + names[:r % len(names)]:
+                    stem = Path(folder) / f"{name}-round{r}"
+                    result = train_model(configs[name], train, val, train_configs[name], stem, progress=False,
+                                         stop_after_epochs=1)
+                    seconds[name].append(float(result.history[-1]["seconds"]))
+    finally:
+        torch.set_num_threads(previous)
+    base = names[0]
+    rows = []
+    for name in names:
+        t, ratio = np.asarray(seconds[name]), np.asarray(seconds[name]) / np.asarray(seconds[base])
+        rows.append({"model": name, "threads": threads, "rounds": rounds, "sequences": len(train),
+                     "batch": train_configs[name].batch_size, "epoch_median_s": float(np.median(t)),
+                     "epoch_iqr_s": float(np.subtract(*np.quantile(t, [0.75, 0.25]))),
+                     f"ratio_to_{base}": float(np.median(ratio)),
+                     f"ratio_to_{base}_iqr": float(np.subtract(*np.quantile(ratio, [0.75, 0.25])))})
+    return pd.DataFrame(rows)
 
 
 def fit_fixed_and_per_item(sizes, seconds) -> tuple[float, float]:

@@ -83,6 +83,24 @@ def test_results_section_reports_the_recursion_scaling_per_thread_count(tmp_path
     assert "**1.53×**" in text and "`tables/pendulum_recursion_scaling.csv`" in text
 
 
+def test_results_section_reports_whole_epochs(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    claims.upsert("p", [claims.c6_speedup(3.0)])
+    (tmp_path / "p" / "tables").mkdir()
+    common = {"threads": 2, "rounds": 3, "sequences": 2000, "batch": 50}
+    pd.DataFrame([{**common, "model": "no_dynamics", "epoch_median_s": 7.0, "ratio_to_no_dynamics": 1.0,
+                   "ratio_to_no_dynamics_iqr": 0.0},
+                  {**common, "model": "lstm", "epoch_median_s": 7.4, "ratio_to_no_dynamics": 1.06,
+                   "ratio_to_no_dynamics_iqr": 0.02},
+                  {**common, "model": "drf", "epoch_median_s": 11.8, "ratio_to_no_dynamics": 1.69,
+                   "ratio_to_no_dynamics_iqr": 0.11}]).to_csv(tmp_path / "p" / "tables" / "pendulum_epoch_times.csv",
+                                                              index=False)
+    text = results_section("p", "make reproduce", False)
+    assert ("(the training loop itself, validation and checkpoints included, 3 interleaved rounds, 2 torch "
+            "thread(s), 2000 sequences): against a no_dynamics epoch of 7 s, lstm **1.06×** (IQR 0.02; 7.4 s), "
+            "drf **1.69×** (IQR 0.11; 11.8 s); target ≤ 1.5× for the DRF") in text
+
+
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     claims.upsert("p", [claims.c6_speedup(3.0)])

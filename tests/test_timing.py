@@ -356,3 +356,46 @@ def test_recursion_scaling_times_the_recursion_with_its_backward(monkeypatch):
         timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets, sizes=(2.5,))
     with pytest.raises(ValueError, match="disagree on the batch"):
         timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets[:2])
+
+
+def test_epoch_times_rotates_models_and_takes_per_round_ratios(monkeypatch):
+    from types import SimpleNamespace
+
+    import drfkit.train
+
+    per_round = {"no_dynamics": [2.0, 1.0, 4.0], "drf": [2.0, 5.0, 6.0]}  # per-round ratios 1, 5, 1.5
+    calls = []
+
+    def fake_train_model(config, train, val, cfg, stem, progress, stop_after_epochs):
+        calls.append((config["kind"], stem.name, progress, stop_after_epochs))
+        seconds = per_round[config["kind"]][sum(c[0] == config["kind"] for c in calls) - 1]
+        return SimpleNamespace(history=[{"seconds": seconds}])
+
+    monkeypatch.setattr(drfkit.train, "train_model", fake_train_model)
+    cfg = drfkit.train.TrainConfig(epochs=5, lr=1e-3, batch_size=4, seed=0)
+    configs = {"no_dynamics": {"kind": "no_dynamics"}, "drf": {"kind": "drf"}}
+    table = timing.epoch_times(configs, list(range(10)), None, {k: cfg for k in configs}, rounds=3, threads=1)
+    assert [c[0] for c in calls] == ["no_dynamics", "drf", "drf", "no_dynamics", "no_dynamics", "drf"]
+    assert len({c[1] for c in calls}) == 6 and all(c[2:] == (False, 1) for c in calls)
+    row = table.set_index("model").loc["drf"]
+    assert row["epoch_median_s"] == 5.0 and row["ratio_to_no_dynamics"] == 1.5  # not 5 / 2
+    assert row["ratio_to_no_dynamics_iqr"] == pytest.approx(3.25 - 1.25) and row["sequences"] == 10
+    with pytest.raises(ValueError, match="same models"):
+        timing.epoch_times(configs, [], None, {"drf": cfg})
+    with pytest.raises(ValueError, match="rounds"):
+        timing.epoch_times(configs, [], None, {k: cfg for k in configs}, rounds=0)
+
+
+def test_epoch_times_trains_real_epochs_in_a_temporary_folder(tmp_path, monkeypatch):
+    from drfkit.models import default_config
+    from drfkit.train import SequenceData, TrainConfig
+
+    monkeypatch.chdir(tmp_path)
+    g = torch.Generator().manual_seed(0)
+    data = SequenceData(torch.randint(0, 256, (6, 4, 24, 24), dtype=torch.uint8, generator=g),
+                        torch.randn(6, 4, 2, generator=g))
+    configs = {k: default_config(k, "pendulum", 2) for k in ("no_dynamics", "drf")}
+    cfg = TrainConfig(epochs=3, lr=1e-3, batch_size=3, seed=0)
+    table = timing.epoch_times(configs, data, data, {k: cfg for k in configs}, rounds=1, threads=1)
+    assert (table["epoch_median_s"] > 0).all() and table["batch"].eq(3).all() and table["rounds"].eq(1).all()
+    assert list(tmp_path.iterdir()) == []  # checkpoints went to a temporary folder, now gone
