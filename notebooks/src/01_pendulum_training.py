@@ -188,9 +188,10 @@ epochs
 # a line t(b) = fixed + per-sequence · b. Its intercept is the per-call cost; its slope the work of
 # one more sequence with torch's kernels as they run now. `floor_ratio` removes the intercept from
 # the DRF step: the step ratio a recursion with no per-call cost at all, calling the same kernels,
-# would reach. It is measured at one thread and at the notebook's thread count; where it stays
+# would reach. It is measured at one thread and at the notebook's thread count. Where it stays
 # above 1.5, trimming overhead, in Python or in a compiled loop, cannot meet the target, and only
-# faster kernels for the small products and factorisations could.
+# faster kernels for the small products and factorisations could; where it is below, a loop with
+# no per-call cost at all could, by no more than the margin it shows.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
