@@ -42,6 +42,7 @@ change the cost (no data-dependent control flow), so no training is needed to ti
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -74,20 +75,38 @@ COLUMNS = ["study", "model", "mode", "n_samples", "batch", "threads", "device", 
 GROUP = ["batch", "threads", "device"]  # ratios are taken only inside one such group of one run
 
 
-def _single_calls(fn, threads: int, n_calls: int) -> list[float]:
-    """Seconds of ``n_calls`` calls of fn at ``threads``, each timed alone with the
-    benchmark's clock (which synchronises CUDA before reading the time)."""
+@contextlib.contextmanager
+def torch_threads(threads: int):
+    """Run the block at ``threads`` torch threads, restoring the previous count after it."""
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def training_step(model, inputs: torch.Tensor, targets: torch.Tensor) -> Callable[[], Any]:
+    """One optimisation step's work of ``model`` on a batch (forward, loss, gradients of every
+    parameter), as a function to time or count."""
+    params = list(model.parameters())
+
+    def step():
+        mean, sigma = model(inputs)
+        return torch.autograd.grad(model.loss(mean, sigma, targets, None), params, allow_unused=True)
+    return step
+
+
+def _single_calls(fn, threads: int, n_calls: int) -> list[float]:
+    """Seconds of ``n_calls`` calls of fn at ``threads``, each timed alone with the
+    benchmark's clock (which synchronises CUDA before reading the time)."""
+    with torch_threads(threads):
         times = []
         for _ in range(n_calls):
             start = synchronised_clock()
             fn()
             times.append(synchronised_clock() - start)
         return times
-    finally:
-        torch.set_num_threads(previous)
 
 
 def _warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str = "",
@@ -165,20 +184,15 @@ def epoch_times(configs: dict[str, dict[str, Any]], train, val, train_configs: d
         raise ValueError(f"configs and train_configs must name the same models, got {names} and {list(train_configs)}")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise ValueError(f"rounds must be a positive int, got {rounds!r}")
-    previous = torch.get_num_threads()
-    threads = threads or previous
-    torch.set_num_threads(threads)
+    threads = threads or torch.get_num_threads()
     seconds: dict[str, list[float]] = {n: [] for n in names}
-    try:
-        with tempfile.TemporaryDirectory() as folder:
-            for r in range(rounds):
-                for name in names[r % len(names):] + names[:r % len(names)]:
-                    stem = Path(folder) / f"{name}-round{r}"
-                    result = train_model(configs[name], train, val, train_configs[name], stem, progress=False,
-                                         stop_after_epochs=1)
-                    seconds[name].append(float(result.history[-1]["seconds"]))
-    finally:
-        torch.set_num_threads(previous)
+    with torch_threads(threads), tempfile.TemporaryDirectory() as folder:
+        for r in range(rounds):
+            for name in names[r % len(names):] + names[:r % len(names)]:
+                stem = Path(folder) / f"{name}-round{r}"
+                result = train_model(configs[name], train, val, train_configs[name], stem, progress=False,
+                                     stop_after_epochs=1)
+                seconds[name].append(float(result.history[-1]["seconds"]))
     base = names[0]
     rows = []
     for name in names:
@@ -243,14 +257,6 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
     if drf.kind != "drf":
         raise ValueError(f"drf_config must build a DRF, got kind {drf.kind!r}")
 
-    def train_step(model):
-        params = list(model.parameters())
-
-        def step():
-            mean, sigma = model(inputs)
-            return torch.autograd.grad(model.loss(mean, sigma, targets, None), params, allow_unused=True)
-        return step
-
     with torch.no_grad():
         w, r = drf.observe(inputs)  # (B, T, n) each: realistic observations for the filter
     weights = list(drf.transition.parameters())
@@ -266,15 +272,12 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
             return torch.autograd.grad((z, p), [w_b, r_b, *weights], (ones, ones))
         return run
 
-    fns = {"base": train_step(base), "drf": train_step(drf)} | {f"recursion_{b}": recursion(b) for b in sizes}
-    previous = torch.get_num_threads()
-    threads = threads or previous
-    torch.set_num_threads(threads)
-    try:
+    fns = ({"base": training_step(base, inputs, targets), "drf": training_step(drf, inputs, targets)}
+           | {f"recursion_{b}": recursion(b) for b in sizes})
+    threads = threads or torch.get_num_threads()
+    with torch_threads(threads):
         times = {k: np.asarray(v) for k, v in
                  interleaved_times(fns, min_run_time, block_s=0.0, min_rounds=min_rounds).items()}
-    finally:
-        torch.set_num_threads(previous)
     medians = {k: float(np.median(v)) for k, v in times.items()}
     fixed, per_sequence = fit_fixed_and_per_item(sizes, [medians[f"recursion_{b}"] for b in sizes])
     floor = (times["drf"] - times[f"recursion_{batch}"] + per_sequence * batch) / times["base"]
@@ -350,21 +353,10 @@ def training_step_times(configs: dict[str, dict[str, Any]], inputs: torch.Tensor
             if not hasattr(model, attr):
                 raise ValueError(f"model_attrs[{name!r}]: {type(model).__name__} has no attribute {attr!r}")
             setattr(model, attr, value)
-        params = list(model.parameters())
-
-        def step(model=model, params=params):
-            mean, sigma = model(inputs)
-            loss = model.loss(mean, sigma, targets, None)
-            return torch.autograd.grad(loss, params, allow_unused=True)
-
-        steps[name] = step
+        steps[name] = training_step(model, inputs, targets)
     flops = {name: count_flops(step) for name, step in steps.items()} if with_flops else {}
-    previous = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
+    with torch_threads(threads):
         times = interleaved_times(steps, min_run_time, block_s=0.0, min_rounds=min_rounds)
-    finally:
-        torch.set_num_threads(previous)
     base = next(iter(configs))
     rows = []
     for name, per_round in times.items():

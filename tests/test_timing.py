@@ -399,3 +399,13 @@ def test_epoch_times_trains_real_epochs_in_a_temporary_folder(tmp_path, monkeypa
     table = timing.epoch_times(configs, data, data, {k: cfg for k in configs}, rounds=1, threads=1)
     assert (table["epoch_median_s"] > 0).all() and table["batch"].eq(3).all() and table["rounds"].eq(1).all()
     assert list(tmp_path.iterdir()) == []  # checkpoints went to a temporary folder, now gone
+
+
+def test_torch_threads_restores_the_count_even_after_an_error():
+    before = torch.get_num_threads()
+    other = 1 if before != 1 else 2
+    with pytest.raises(RuntimeError, match="inside"):
+        with timing.torch_threads(other):
+            assert torch.get_num_threads() == other
+            raise RuntimeError("inside")
+    assert torch.get_num_threads() == before
