@@ -40,7 +40,7 @@ def epochs_done(P, study: str, kind: str) -> tuple[int, int]:
     return done, left
 
 
-RATIO_BASE = "no_dynamics"  # the denominator of step_ratio (issue #4: a DRF epoch <= 1.5x a no_dynamics one)
+RATIO_BASE = "no_dynamics"  # the denominator of step_ratio (the speed target: a DRF epoch <= 1.5x a no_dynamics one)
 
 
 def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:

@@ -22,12 +22,13 @@ from drfkit.paths import results_dir
 
 REPRODUCED, PARTLY, NOT = "reproduced", "partly", "not reproduced"
 NOT_TESTABLE = "not testable"  # the data cannot decide (e.g. a gate that selects no frame or every frame)
-COLUMNS = ["id", "claim", "paper", "ours", "rule", "verdict"]
+COLUMNS = ["id", "protocol", "claim", "paper", "ours", "rule", "verdict"]
 # Every claim row and what fills it: claims.md lists the ones a profile has not evaluated yet.
 CLAIM_SOURCES = {
     "C1": "notebook 03, pendulum", "C2": "notebook 03, pendulum", "C3": "notebook 03, pedestrians",
     "C4": "notebook 03, pedestrians", "C5": "notebook 03, both studies", "C6": "notebook 04",
     "C7a": "notebook 05, pendulum", "C7b": "notebook 05, pedestrians",
+    "F1": "notebook 01, pendulum", "F2": "notebook 01, pendulum",
 }
 
 
@@ -222,14 +223,54 @@ def c7_gating(table: pd.DataFrame, study: str) -> dict[str, Any]:
             "verdict": verdict}
 
 
+# ------------------------------------------------------------------------- F1, F2
+# Not claims the paper states but the premise of its method: a recursive filter inside the network
+# is only "a filter" if its gain follows observation quality, its transition predicts and its state
+# coasts through missing observations. The book checks them before reading the claims above.
+def f1_filter_mechanism(mechanism: pd.DataFrame, level: float) -> dict[str, Any]:
+    """mechanism: ``drfkit.dynamics.mechanism_table`` rows of the DRF (one per seed)."""
+    drf = mechanism[mechanism["model"] == "drf"]
+    rho, ratio, prior = (float(drf[c].mean()) for c in ("r_noise_spearman", "gain_ratio_blackout", "prior_ratio"))
+    checks = [rho >= 0.8, ratio <= 0.25, prior < 1.0]
+    verdict = REPRODUCED if all(checks) else PARTLY if any(checks) else NOT
+    return {"id": "F1", "claim": "The DRF's filter filters: r follows frame quality, the gain drops on pure noise, "
+                                 "F predicts the next observation",
+            "paper": "implied by the method (Kalman update on a learned latent state)",
+            "ours": f"rank corr(r, noise) {rho:.2f} at max noise {level:g}; gain pure/clean {ratio:.2f} on the blackout; "
+                    f"‖Fz − w‖/‖z − w‖ {prior:.2f} (seed means)",
+            "rule": "reproduced: rank correlation >= 0.8, gain ratio <= 0.25 and prediction ratio < 1; partly: at "
+                    "least one of the three; else not reproduced",
+            "verdict": verdict}
+
+
+def f2_blackout_coasting(blackout: pd.DataFrame, bound_mae: float, target: float = 0.10) -> dict[str, Any]:
+    """blackout: ``drfkit.dynamics.blackout_table`` rows (model, seed, mae_blackout)."""
+    means = blackout.groupby("model")["mae_blackout"].mean()
+    drf = float(means["drf"])
+    others = {k: float(v) for k, v in means.items() if k not in ("drf", "physics_bound")}
+    verdict = REPRODUCED if drf <= target else PARTLY if drf < min(others.values(), default=math.inf) else NOT
+    return {"id": "F2", "claim": "The DRF's state coasts through 15 pure-noise frames",
+            "paper": "implied by the method (the prior carries the state when the gain falls)",
+            "ours": f"MAE on the blackout frames: DRF {drf:.3f}, " + ", ".join(f"{k} {v:.3f}" for k, v in others.items())
+                    + f"; true-physics bound {bound_mae:.3f}",
+            "rule": f"reproduced: DRF MAE <= {target:g}; partly: lower than every baseline's; else not reproduced",
+            "verdict": verdict}
+
+
 # ----------------------------------------------------------------------------- table
-def upsert(profile: str, rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """Replace rows with the same ids in ``results/<profile>/claims.csv``; rewrite claims.md."""
+def upsert(profile: str, rows: list[dict[str, Any]], protocol: str = "paper") -> pd.DataFrame:
+    """Replace rows with the same (id, protocol) in ``results/<profile>/claims.csv``; rewrite claims.md.
+    ``protocol``: the training protocol of the models the rows judge (``drfkit.protocols``)."""
     path = results_dir(profile) / "claims.csv"
     table = pd.read_csv(path) if path.exists() else pd.DataFrame(columns=COLUMNS)
-    new = pd.DataFrame(rows, columns=COLUMNS)
-    table = pd.concat([table[~table["id"].isin(new["id"])], new], ignore_index=True)
-    table = table.sort_values("id", key=lambda s: s.str.slice(1).map(lambda v: (int(v.rstrip("ab")), v)))
+    if "protocol" not in table:  # tables written before protocols existed judged the paper's
+        table.insert(1, "protocol", "paper")
+    new = pd.DataFrame([{**row, "protocol": protocol} for row in rows], columns=COLUMNS)
+    replaced = table.set_index(["id", "protocol"]).index.isin(new.set_index(["id", "protocol"]).index)
+    table = pd.concat([table[~replaced], new], ignore_index=True)
+    order = table["id"].map(lambda v: ({"C": 0, "F": 1}.get(v[0], 2), int(v[1:].rstrip("ab")), v))
+    table = (table.assign(_order=order, _book=table["protocol"].ne("paper"))
+             .sort_values(["_order", "_book", "protocol"]).drop(columns=["_order", "_book"]))
     atomic_write_csv(path, table)
     atomic_write_text(results_dir(profile) / "claims.md", to_markdown(table, profile))
     return table
@@ -238,11 +279,12 @@ def upsert(profile: str, rows: list[dict[str, Any]]) -> pd.DataFrame:
 def to_markdown(table: pd.DataFrame, profile: str) -> str:
     lines = [f"# Claims of the paper, checked on profile `{profile}`", "",
              "Generated by `drfkit.claims` from the results of this profile; verdicts are computed by the "
-             "rule in each row.", "", "| id | claim | paper | ours | verdict | rule |", "|---|---|---|---|---|---|"]
+             "rule in each row; `protocol` names how the judged models were trained (`drfkit.protocols`).", "",
+             "| id | protocol | claim | paper | ours | verdict | rule |", "|---|---|---|---|---|---|---|"]
     for _, r in table.iterrows():
-        cells = [str(r[c]).replace("|", "/") for c in ("id", "claim", "paper", "ours", "verdict", "rule")]
+        cells = [str(r[c]).replace("|", "/") for c in ("id", "protocol", "claim", "paper", "ours", "verdict", "rule")]
         lines.append("| " + " | ".join(cells) + " |")
-    missing = [f"{cid} ({src})" for cid, src in CLAIM_SOURCES.items() if cid not in set(table["id"])]
+    missing = [f"{cid} ({src})" for cid, src in CLAIM_SOURCES.items() if cid not in set(table["id"])]  # any protocol
     if missing:
         lines += ["", "Not evaluated yet in this profile: " + "; ".join(missing) + "."]
     return "\n".join(lines) + "\n"

@@ -18,6 +18,9 @@ from drfkit import metrics
 from drfkit.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
+# The values each metric can take (PICP is a fraction): interval ends are clipped to them.
+METRIC_RANGES = {"mae": (0.0, math.inf), "picp": (0.0, 1.0), "mpiw": (0.0, math.inf), "crps": (0.0, math.inf),
+                 "cal_error": (0.0, 1.0)}
 
 # Two-sided 95 % Student-t quantiles t_{0.975, df}; beyond df = 30 the normal value.
 _T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
@@ -109,7 +112,9 @@ def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = ME
             x = group[v].to_numpy(dtype=float)
             mean = float(x.mean())
             half = t975(len(x) - 1) * float(x.std(ddof=1)) / math.sqrt(len(x)) if len(x) > 1 else math.nan
-            row.update({v: mean, f"{v}_ci": half, f"{v}_lo": mean - half, f"{v}_hi": mean + half})
+            lo, hi = METRIC_RANGES.get(v, (-math.inf, math.inf))
+            # with 2 or 3 seeds the t-interval is wide; its ends are clipped to what the metric can take
+            row.update({v: mean, f"{v}_ci": half, f"{v}_lo": max(mean - half, lo), f"{v}_hi": min(mean + half, hi)})
         rows.append(row)
     return pd.DataFrame(rows)
 

@@ -6,11 +6,15 @@ leaves a half-written file that a later step would trust.
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import io
 import json
 import os
+import socket
 import tempfile
+import time
 import zipfile
 from pathlib import Path
 from typing import Any, Callable
@@ -24,6 +28,40 @@ os.umask(_UMASK)
 
 class CorruptArtefactError(RuntimeError):
     """A cached file or checkpoint exists but cannot be read."""
+
+
+class LockedError(RuntimeError):
+    """Another process holds the lock of a file this process would write."""
+
+
+@contextlib.contextmanager
+def exclusive_lock(path: str | os.PathLike, what: str, wait_s: float = 0.0):
+    """Hold an OS lock (``flock``) on ``path`` for the block; if another process holds it after
+    ``wait_s`` seconds, raise ``LockedError`` naming that process. The lock dies with its process
+    (kill -9 included), so a crashed writer never leaves a lock behind; the file stays, harmless."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fh = open(path, "a+")
+    deadline = time.monotonic() + wait_s
+    try:
+        while True:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    fh.seek(0)
+                    holder = fh.read().strip() or "an unknown process"
+                    raise LockedError(f"{what} is being written by {holder} (lock {path}); wait until it has "
+                                      "finished or stop it -- this process wrote nothing") from None
+                time.sleep(0.2)
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"process {os.getpid()} on {socket.gethostname()}")
+        fh.flush()
+        yield
+    finally:
+        fh.close()  # closing the file releases the lock
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:

@@ -21,6 +21,7 @@ from typing import Any, Callable
 import yaml
 
 from drfkit.paths import PARAMS_DIR
+from drfkit.protocols import ABLATION_BUDGETS, PROTOCOLS, VARIANTS
 
 
 class ParameterError(ValueError):
@@ -72,6 +73,20 @@ SPECS: dict[str, Spec] = {
     "pend_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
     "pend_patience": Spec("int", "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
                           "stop a run after this many epochs without a better validation NLL"),
+    "pend_protocols": Spec("list[str]", f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
+                           lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
+                           "the training protocols notebook 01 trains and evaluates (drfkit.protocols)"),
+    "pend_book_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1, "epochs of the book's protocol"),
+    "pend_book_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
+    "pend_book_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
+    # -- the dynamics study (notebook 01) ------------------------------------------------------
+    "bound_particles": Spec("int", "an integer >= 10", lambda v: v >= 10,
+                            "particles of the true-physics bound (drfkit.oracle)"),
+    "ablation_budget": Spec("str", f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
+    "ablation_variants": Spec("list[str]", f"a non-empty subset of {list(VARIANTS)}",
+                              lambda v: len(v) > 0 and set(v) <= set(VARIANTS)),
+    "ablation_seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
+                           lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0),
     # -- pedestrian data ---------------------------------------------------------------------
     "ped_source": Spec("str", "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
     "nuscenes_root": Spec("str", "'' (none) or a folder holding <nuscenes_version>/sample.json ..."),
@@ -123,7 +138,9 @@ SPECS: dict[str, Spec] = {
 _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
-_PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience"]
+_PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
+               "pend_book_epochs", "pend_book_batch_size", "pend_book_lr"]
+_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",
              "ped_data_seed", "sim_detector"]
@@ -136,7 +153,7 @@ _EVAL = ["eval_studies"]
 
 NOTEBOOKS: dict[str, list[str]] = {
     "00_data_prep": _COMMON + _PEND_DATA + _PED_DATA,
-    "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC,
+    "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
     "02_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
     "03_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
     "04_timing": _COMMON + ["n_samples"] + _TIMING,
@@ -213,6 +230,15 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
                 f"{where}: parameter '{key}' = {value!r} is out of range; allowed: {spec.allowed}"
             )
         out[key] = value
+    if out.get("ped_source") == "nuscenes":
+        for key, holds in (("nuscenes_root", f"{out.get('nuscenes_version', '<version>')}/sample.json and the other "
+                                             "tables"),
+                           ("pifpaf_predictions", "one sub-folder of PifPaf JSON per noise level (p0.01, ...)")):
+            if key in out and not out[key]:
+                raise ParameterError(f"{where}: ped_source 'nuscenes' needs '{key}' in the profile: the folder that "
+                                     f"holds {holds} (README, 'Real nuScenes data'); it is empty")
+            if key in out and not Path(out[key]).is_dir():
+                raise ParameterError(f"{where}: parameter '{key}' = {out[key]!r} is not a folder on this machine")
     if "sim_detector" in out:
         from drfkit.data.pedestrians import DetectorConfig
 

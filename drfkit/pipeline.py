@@ -4,22 +4,111 @@ Validates the profile before anything runs, then executes every notebook in orde
 papermill (progress bar on), writing executed notebooks to ``results/<profile>/executed/``.
 Stops at the first failing notebook and names it. The manifest records each notebook's
 duration and the total.
+
+A notebook's outputs are all or nothing: if it fails or is stopped (Ctrl-C, SIGTERM, SIGHUP), every
+output file it changed is put back as it was before it started (checkpoints and data caches
+excepted: they are written atomically and resume), its kernel and children are stopped, and the
+manifest says ``interrupted in <notebook>`` or ``failed in <notebook>``. Rerunning the same
+command after that skips the notebooks that finished with the same parameters and code.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
+import signal
 import sys
 import time
 from pathlib import Path
 
-from drfkit.manifest import now_iso, update_manifest
+from drfkit.io import param_hash
+from drfkit.manifest import now_iso, read_manifest, record_notebook, update_manifest
 from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
-from drfkit.paths import NOTEBOOKS_DIR, results_dir
+from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
+
+# What a notebook run may leave half-rewritten: everything under results/<profile>/ except the
+# checkpoints (written atomically per epoch and resumable), the data caches (hashed by their
+# parameters) and the manifest (which records the interruption itself).
+UNSNAPSHOTTED = ("models", "data", "ablation", "manifest.json")
 
 
 def notebook_path(name: str) -> Path:
     return NOTEBOOKS_DIR / f"{name}.ipynb"
+
+
+def code_hash(name: str) -> str:
+    """The notebook and every drfkit source: what a finished notebook's outputs depend on besides
+    its parameters."""
+    digest = hashlib.sha256(notebook_path(name).read_bytes())
+    for path in sorted((REPO_ROOT / "drfkit").rglob("*.py")):
+        digest.update(path.relative_to(REPO_ROOT).as_posix().encode() + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def snapshot_outputs(root: Path) -> dict[Path, bytes]:
+    """The bytes of every output file under ``root`` (UNSNAPSHOTTED left out): a few MB."""
+    if not root.exists():
+        return {}
+    return {p: p.read_bytes() for p in root.rglob("*")
+            if p.is_file() and p.relative_to(root).parts[0] not in UNSNAPSHOTTED}
+
+
+def restore_outputs(root: Path, snapshot: dict[Path, bytes]) -> list[Path]:
+    """Put ``root``'s outputs back as ``snapshot`` had them (files added since are removed);
+    returns the paths that changed. A notebook stopped half-way leaves the previous outputs whole."""
+    changed = []
+    for path in (snapshot_outputs(root).keys() - snapshot.keys()):
+        path.unlink(missing_ok=True)
+        changed.append(path)
+    for path, data in snapshot.items():
+        if not path.exists() or path.read_bytes() != data:
+            from drfkit.io import atomic_write_bytes
+
+            atomic_write_bytes(path, data)
+            changed.append(path)
+    return changed
+
+
+class Interrupted(Exception):
+    """SIGTERM or SIGHUP reached the pipeline (Ctrl-C arrives as KeyboardInterrupt)."""
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signal.Signals(signum).name)
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every live descendant of ``pid`` (Linux /proc): the Jupyter kernel and what it started."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, todo = [], [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.append(child)
+            todo.append(child)
+    return out
+
+
+def _stop_descendants() -> None:
+    for pid in _descendants(os.getpid()):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def _resumable(manifest: dict, name: str, params_key: str, code: str) -> bool:
+    """After an interrupted or failed pipeline: a notebook that finished with the same parameters
+    and code is not run again."""
+    status = str(manifest.get("pipeline", {}).get("status", ""))
+    entry = manifest.get("pipeline", {}).get("finished_notebooks", {}).get(name, {})
+    return (status.startswith(("interrupted", "failed")) and entry.get("params") == params_key
+            and entry.get("code") == code)
 
 
 def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
@@ -32,43 +121,85 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
     if only and set(only) - set(NOTEBOOKS):
         raise ParameterError(f"unknown notebook(s) {sorted(set(only) - set(NOTEBOOKS))}; known: {list(NOTEBOOKS)}")
     per_notebook = {name: notebook_params(name, values) for name in names}  # all errors before any run
-    out_dir = results_dir(profile_name, "executed")
+    root, out_dir = results_dir(profile_name), results_dir(profile_name, "executed")
+    previous = read_manifest(profile_name)
+    finished = dict(previous.get("pipeline", {}).get("finished_notebooks", {}))
     started, t0 = now_iso(), time.perf_counter()
-    update_manifest(profile_name, profile_file=str(profile), profile_values=values, overrides=overrides or {},
-                    pipeline={"started": started, "finished": None, "total_s": None, "status": "running",
-                              "notebooks": names})
-    durations = {}
-    for name in names:
-        print(f"== {name} ({profile_name})", flush=True)
-        t = time.perf_counter()
-        final, partial = out_dir / f"{name}.ipynb", out_dir / f".{name}.partial.ipynb"
-        try:
-            # papermill rewrites its output after every cell: run into a partial file and move it
-            # into place when done, so a killed run never leaves a half-executed notebook behind
-            pm.execute_notebook(
-                str(notebook_path(name)), str(partial),
-                parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
-                cwd=str(NOTEBOOKS_DIR), log_output=False,
-            )
-        except Exception as exc:  # papermill raises PapermillExecutionError with the cell's traceback
-            failed = out_dir / f"{name}.failed.ipynb"
-            if partial.exists():
-                os.replace(partial, failed)  # complete up to the failing cell, which shows the error
+    durations: dict[str, float] = {}
+
+    def record(status: str, finished_at: str | None = None) -> None:
+        update_manifest(profile_name, profile_file=str(profile), profile_values=values, overrides=overrides or {},
+                        pipeline={"started": started, "finished": finished_at, "status": status,
+                                  "total_s": round(time.perf_counter() - t0, 1) if finished_at else None,
+                                  "durations_s": durations, "notebooks": names, "finished_notebooks": finished})
+
+    record("running")
+    handlers = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        for name in names:
+            params_key, code = param_hash(per_notebook[name]), code_hash(name)
+            if _resumable(previous, name, params_key, code) and (out_dir / f"{name}.ipynb").exists():
+                print(f"== {name} ({profile_name}): finished before with these parameters and code, skipped",
+                      flush=True)
+                continue
+            finished.pop(name, None)
+            print(f"== {name} ({profile_name})", flush=True)
+            t = time.perf_counter()
+            final, partial = out_dir / f"{name}.ipynb", out_dir / f".{name}.partial.ipynb"
+            before = snapshot_outputs(root)
+            try:
+                # papermill rewrites its output after every cell: run into a partial file and move it
+                # into place when done, so a killed run never leaves a half-executed notebook behind
+                pm.execute_notebook(
+                    str(notebook_path(name)), str(partial),
+                    parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
+                    cwd=str(NOTEBOOKS_DIR), log_output=False,
+                )
+            except (KeyboardInterrupt, Interrupted) as exc:
+                _stop_descendants()
+                partial.unlink(missing_ok=True)
+                restore_outputs(root, before)
+                durations[name] = round(time.perf_counter() - t, 1)
+                record_notebook(profile_name, name, status="interrupted", finished=now_iso())
+                record(f"interrupted in {name}", now_iso())
+                print(f"\nINTERRUPTED ({exc or 'SIGINT'}) in notebook {name}: its outputs were put back as they "
+                      f"were before it started; the notebooks before it are complete. Rerun the same command to "
+                      f"continue from {name}.", file=sys.stderr)
+                return 130
+            except Exception as exc:  # papermill raises PapermillExecutionError with the cell's traceback
+                failed = out_dir / f"{name}.failed.ipynb"
+                if partial.exists():
+                    os.replace(partial, failed)  # complete up to the failing cell, which shows the error
+                restore_outputs(root, before | {failed: failed.read_bytes()} if failed.exists() else before)
+                durations[name] = round(time.perf_counter() - t, 1)
+                record_notebook(profile_name, name, status="failed", finished=now_iso())
+                record(f"failed in {name}", now_iso())
+                print(f"\nFAILED: notebook {name} ({type(exc).__name__}); the executed copy with the error is "
+                      f"{failed}; the other outputs are as they were before it started\n{exc}", file=sys.stderr)
+                return 1
+            os.replace(partial, final)
+            (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
             durations[name] = round(time.perf_counter() - t, 1)
-            update_manifest(profile_name, pipeline={
-                "started": started, "finished": now_iso(), "total_s": round(time.perf_counter() - t0, 1),
-                "status": f"failed in {name}", "durations_s": durations, "notebooks": names})
-            print(f"\nFAILED: notebook {name} ({type(exc).__name__}); the executed copy with the error is "
-                  f"{failed}\n{exc}", file=sys.stderr)
-            return 1
-        os.replace(partial, final)
-        (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
-        durations[name] = round(time.perf_counter() - t, 1)
-    total = round(time.perf_counter() - t0, 1)
-    update_manifest(profile_name, pipeline={"started": started, "finished": now_iso(), "total_s": total,
-                                            "status": "ok", "durations_s": durations, "notebooks": names})
-    print(f"== done: {len(names)} notebooks in {total:.0f} s; results in {results_dir(profile_name)}")
+            finished[name] = {"params": params_key, "code": code, "at": now_iso()}
+            record("running")
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    record("ok", now_iso())
+    print(f"== done: {len(names)} notebooks in {time.perf_counter() - t0:.0f} s; results in {root}")
     return 0
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to send us SIGTERM when our parent dies: ``make`` does not pass a SIGTERM it receives
+    on to its children, so without this a killed ``make reproduce`` would leave the pipeline running."""
+    try:
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):  # not Linux: Ctrl-C and a SIGTERM sent to the pipeline still work
+        pass
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
                         help="override profile parameters (YAML values); recorded in the manifest")
     args = parser.parse_args(argv)
+    _die_with_parent()
     try:
         return run(args.profile, args.only, overrides=parse_overrides(args.set))
     except ParameterError as exc:

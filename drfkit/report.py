@@ -44,9 +44,11 @@ def _paper_value(paper: dict, level: float, model: str) -> float:
 
 
 def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None = None, ylabel: str = "MAE",
-                  level_name: str = "noise", width: float = 6.0):
+                  level_name: str = "noise", width: float = 6.0, bound: dict | None = None,
+                  bound_label: str = "true-physics bound"):
     """Grouped bars of seed-mean MAE (95 % interval as error bar) per noise level and model;
-    the paper's value as a black tick on each bar. summary: ``drfkit.evaluate.summarise`` by model, noise."""
+    the paper's value as a black tick on each bar; ``bound`` (level -> MAE) as a dashed line
+    across each level's group. summary: ``drfkit.evaluate.summarise`` by model, noise."""
     fig, axes = new_figure(1, width=width)
     ax = axes[0, 0]
     levels = sorted(summary["noise"].unique())
@@ -54,13 +56,37 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
     for i, kind in enumerate(models):
         rows = summary[summary["model"] == kind].set_index("noise").reindex(levels)
         x = np.arange(len(levels)) + i * w
-        ax.bar(x, rows["mae"], w * 0.9, yerr=rows["mae_ci"].fillna(0), color=color(kind), label=label(kind))
+        ci = rows["mae_ci"].fillna(0).to_numpy()
+        below = np.minimum(ci, rows["mae"].to_numpy())  # an MAE is >= 0: the bar's interval stops there
+        ax.bar(x, rows["mae"], w * 0.9, yerr=np.stack([below, ci]), color=color(kind), label=label(kind))
         if paper:
             ax.scatter(x, [_paper_value(paper, lv, kind) for lv in levels], marker="_", s=300, color="black",
                        zorder=3, label="paper" if i == 0 else None)
+    for j, lv in enumerate(levels):
+        value = _paper_value({float(k): {"bound": v} for k, v in (bound or {}).items()}, lv, "bound")
+        if np.isfinite(value):
+            ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="black", linestyles="--", lw=1,
+                      label=bound_label if j == 0 else None)
     ax.set_xticks(np.arange(len(levels)) + 0.4 - w / 2)
     ax.set_xticklabels([f"{level_name} {lv:g}" for lv in levels])
     ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7)
+    return fig
+
+
+def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[str]):
+    """MAE per frame (mean over seeds) through a blackout, the blackout frames shaded.
+    curves: columns model, seed, frame, mae (``drfkit.dynamics.blackout_curves``); a model
+    absent from MODEL_COLORS (the bound) is drawn dashed in black."""
+    fig, axes = new_figure(1, width=6.0)
+    ax = axes[0, 0]
+    ax.axvspan(frames[0] - 0.5, frames[1] - 0.5, color="gray", alpha=0.2, label="pure-noise frames")
+    for kind in models:
+        mean = curves[curves["model"] == kind].groupby("frame")["mae"].mean()
+        known = kind in MODEL_COLORS
+        ax.plot(mean.index, mean.to_numpy(), color=color(kind) if known else "black", ls="-" if known else "--",
+                label=label(kind))
+    ax.set_xlabel("frame"); ax.set_ylabel("MAE (cos θ, sin θ)"); ax.set_yscale("log")
     ax.legend(fontsize=7)
     return fig
 
@@ -165,6 +191,51 @@ def recursion_scaling_line(scaling: pd.DataFrame) -> str:
             + " (`tables/pendulum_recursion_scaling.csv`, `figures/pendulum_recursion_scaling.png`).")
 
 
+def dynamics_lines(tables: Path) -> list[str]:
+    """README lines of the dynamics study (notebook 01): both protocols beside the true-physics
+    bound, and the protocol ablation on validation data; [] when notebook 01 has not written them."""
+    lines: list[str] = []
+    protocols, bound = tables / "pendulum_protocols.csv", tables / "pendulum_physics_bound.csv"
+    if protocols.exists() and bound.exists():
+        pt = pd.read_csv(protocols)
+        mae_cols = [c for c in pt if c.startswith("mae_") and c != "mae_after_blackout"]
+        mean = pt.groupby(["protocol", "model"], sort=False).mean(numeric_only=True)
+        b = pd.read_csv(bound).groupby("noise")["mae"].mean()
+        lines += ["Does the filter filter? Test MAE (MC dropout mean, seed means) of each protocol's models beside "
+                  "the true-physics bound (a particle filter with the generator's equations on no_dynamics' "
+                  "per-frame estimates: knowledge no learned model has), and the DRF's mechanism checks "
+                  "(`tables/pendulum_protocols.csv`, `tables/pendulum_physics_bound.csv`, notebook 01):", "",
+                  "| protocol | model | " + " | ".join(c.replace("mae_", "MAE ") for c in mae_cols)
+                  + " | rank corr(r, noise) | gain pure / clean | ‖Fz − w‖ / ‖z − w‖ |",
+                  "|---|---|" + "---|" * (len(mae_cols) + 3)]
+        fmt = lambda v, d=4: "" if pd.isna(v) else f"{v:.{d}f}"  # noqa: E731
+        for (protocol, model), r in mean.iterrows():
+            lines.append(f"| {protocol} | {label(model)} | " + " | ".join(fmt(r[c]) for c in mae_cols) + " | "
+                         + " | ".join(fmt(r.get(c), 2) for c in ("r_noise_spearman", "gain_ratio_blackout", "prior_ratio"))
+                         + " |")
+        # the bound's noise column holds levels and 'blackout': name them as the protocol table's columns
+        bound_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in b.items()}
+        lines += ["| — | true-physics bound | " + " | ".join(fmt(bound_of.get(c)) for c in mae_cols) + " | | | |", ""]
+    ablation = tables / "pendulum_ablation.csv"
+    if ablation.exists():
+        from drfkit.ablation import summarise_ablation
+
+        raw = pd.read_csv(ablation)
+        ab = summarise_ablation(raw)
+        budgets = ", ".join(sorted(raw["budget"].astype(str).unique()))
+        lines += [f"Protocol ablation on **validation** data (`tables/pendulum_ablation.csv`; budget {budgets} of "
+                  "`drfkit.protocols.ABLATION_BUDGETS`, `python -m drfkit.ablation`), sorted by blackout MAE:", "",
+                  "| variant | model | seeds | MAE 0.5 | MAE 0.75 | MAE 1.0 | MAE blackout | rank corr(r, noise) "
+                  "| gain pure / clean | ‖Fz − w‖ / ‖z − w‖ |", "|---|---|---|---|---|---|---|---|---|---|"]
+        for _, r in ab.iterrows():
+            cells = [r.get(k) for k in ("mae_0.5", "mae_0.75", "mae_1", "mae_blackout", "r_noise_spearman",
+                                        "gain_ratio_blackout", "prior_ratio")]
+            lines.append(f"| {r['variant']} | {label(r['kind'])} | {r['n_seeds']} | "
+                         + " | ".join("" if v is None or pd.isna(v) else f"{v:.3g}" for v in cells) + " |")
+        lines.append("")
+    return lines
+
+
 def results_section(profile: str, command: str, link_figures: bool) -> str:
     """The README's results section for ``profile``, built from its claims.md and manifest."""
     import json
@@ -233,6 +304,7 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                       f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
                       f"costs **{drf['ratio_to_no_dynamics']:.2f}×** a no_dynamics step ("
                       + "; ".join(notes) + "; `tables/pendulum_training_speed.csv`).", ""]
+    lines += dynamics_lines(root / "tables")
     epochs = root / "tables" / "pendulum_epoch_times.csv"
     if epochs.exists():
         lines += [epoch_times_line(pd.read_csv(epochs)), ""]

@@ -18,6 +18,7 @@ import torch
 
 from drfkit.io import atomic_write_csv, param_hash
 from drfkit.paths import data_dir, models_dir, tables_dir
+from drfkit.protocols import PROTOCOLS, protocol_spec
 from drfkit.runtime import pick_device
 from drfkit.train import SequenceData, TrainConfig, TrainResult, history_frame, naming_fields, train_model
 
@@ -35,14 +36,27 @@ def pendulum_split(P, split: str, max_noise: float | None = None) -> dict[str, A
                          P.pend_data_seed + SPLIT_SEED_OFFSET[split])
 
 
-def pendulum_data(P, split: str, max_noise: float | None = None) -> SequenceData:
+def pendulum_data(P, split: str, max_noise: float | None = None, protocol: str = "paper") -> SequenceData:
+    """A split as tensors; a protocol with training blackouts (``drfkit.protocols``) adds them to
+    the training split only (validation and test stay as the benchmark makes them)."""
+    from drfkit.data.pendulum import with_random_blackouts
+
     arrays = pendulum_split(P, split, max_noise)
+    blackouts = protocol_spec(protocol, "drf")["blackouts"]
+    if split == "train" and blackouts:
+        arrays = with_random_blackouts(arrays, blackouts["fraction"], tuple(blackouts["lengths"]),
+                                       seed=P.pend_data_seed + TRAINING_BLACKOUT_SEED_OFFSET)
     return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
 
 
-def _pendulum_data_key(P) -> dict[str, Any]:
-    return {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
-                                         "pend_train_max_noise", "pend_data_seed")}
+TRAINING_BLACKOUT_SEED_OFFSET = 7  # which training sequences get a blackout: data seed + this
+
+
+def _pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+    key = {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
+                                        "pend_train_max_noise", "pend_data_seed")}
+    blackouts = protocol_spec(protocol, "drf")["blackouts"]
+    return key | ({"train_blackouts": blackouts} if blackouts else {})  # the paper's key unchanged
 
 
 # ------------------------------------------------------------------------- pedestrians
@@ -67,13 +81,20 @@ def pedestrian_split(P, split: str, noise_p: float | None = None) -> dict[str, A
     return make_sequences(splits[split], P.ped_seq_len)
 
 
-def pedestrian_data(P, split: str, noise_p: float | None = None) -> SequenceData:
+def pedestrian_data(P, split: str, noise_p: float | None = None, protocol: str = "paper") -> SequenceData:
+    _pedestrian_protocol(protocol)
     seqs = pedestrian_split(P, split, noise_p)
     return SequenceData(torch.from_numpy(seqs["inputs"]), torch.from_numpy(seqs["targets"]),
                         torch.from_numpy(seqs["mask"]))
 
 
-def _pedestrian_data_key(P) -> dict[str, Any]:
+def _pedestrian_protocol(protocol: str) -> None:
+    if protocol != "paper":
+        raise ValueError(f"the pedestrian study has only the paper's protocol so far, got {protocol!r}")
+
+
+def _pedestrian_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+    _pedestrian_protocol(protocol)
     return {k: getattr(P, k) for k in ("ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions",
                                          "ped_n_scenes", "ped_frames_per_scene", "ped_train_p", "ped_seq_len",
                                          "ped_data_seed", "sim_detector")}
@@ -86,9 +107,9 @@ STUDIES = {
 }
 
 
-def study_data(P, study: str, split: str, noise: float | None = None) -> SequenceData:
+def study_data(P, study: str, split: str, noise: float | None = None, protocol: str = "paper") -> SequenceData:
     """A split of either study at a noise level (default: the training noise)."""
-    return STUDIES[study]["data"](P, split, noise)
+    return STUDIES[study]["data"](P, split, noise, protocol)
 
 
 def study_models(P, study: str) -> list[str]:
@@ -110,53 +131,68 @@ def target_statistics(P) -> dict[str, float]:
     return dict(_TARGET_STATISTICS[key])
 
 
-def model_config(study: str, kind: str, P=None) -> dict[str, Any]:
-    """The full configuration of ``kind`` in ``study``. For the DRF family on pedestrians
-    the decoder works in standardised depth units (``target_statistics`` of the training
-    split, which needs ``P``); Monoloco keeps its published design (metres directly)."""
+def model_config(study: str, kind: str, P=None, protocol: str = "paper") -> dict[str, Any]:
+    """The full configuration of ``kind`` in ``study`` under ``protocol`` (``drfkit.protocols``:
+    its model options). For the DRF family on pedestrians the decoder works in standardised
+    depth units (``target_statistics`` of the training split, which needs ``P``); Monoloco keeps
+    its published design (metres directly)."""
     from drfkit.models import default_config
 
     spec = STUDIES[study]
     overrides = {}
-    if study == "pedestrians" and kind != "monoloco" and P is not None:
-        overrides = target_statistics(P)
+    if study == "pedestrians":
+        _pedestrian_protocol(protocol)
+        if kind != "monoloco" and P is not None:
+            overrides = target_statistics(P)
+    else:
+        overrides = dict(protocol_spec(protocol, kind)["model"])
     return default_config(kind, spec["input_kind"], spec["out_dim"], **overrides)
 
 
-def train_config(P, study: str, kind: str, seed: int) -> TrainConfig:
+def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -> TrainConfig:
+    if study == "pendulum" and protocol == "book":  # the book's schedule: its own profile keys
+        return TrainConfig(epochs=P.pend_book_epochs, lr=P.pend_book_lr, batch_size=P.pend_book_batch_size,
+                           seed=seed, patience=P.pend_patience)
     if study == "pendulum":
         return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed,
                            patience=P.pend_patience)
-    if kind == "monoloco":  # Monoloco's own schedule (REFERENCE §3): StepLR(20, 0.9), single frames
+    _pedestrian_protocol(protocol)
+    if kind == "monoloco":  # Monoloco's own schedule (Bertoni et al. 2019): StepLR(20, 0.9), single frames
         return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
                            seed=seed, lr_step=20, lr_gamma=0.9, framewise=True)
     return TrainConfig(epochs=P.ped_epochs, lr=P.ped_lr, batch_size=P.ped_batch_size, seed=seed)
 
 
-def checkpoint_stem(P, study: str, kind: str, seed: int):
-    cfg = model_config(study, kind, P)
-    key = param_hash({"model": cfg, "train": naming_fields(train_config(P, study, kind, seed)),
-                      "data": STUDIES[study]["key"](P)}, 8)
+def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper"):
+    cfg = model_config(study, kind, P, protocol)
+    key = param_hash({"model": cfg, "train": naming_fields(train_config(P, study, kind, seed, protocol)),
+                      "data": STUDIES[study]["key"](P, protocol)}, 8)
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 
 
+def curves_name(study: str, protocol: str = "paper") -> str:
+    """File stem of a study's training curves (the paper protocol's keeps its old name)."""
+    return f"{study}_training_curves" if protocol == "paper" else f"{study}_{protocol}_training_curves"
+
+
 def train_models(P, study: str, progress: bool = True, kinds: list[str] | None = None,
-                 seeds: list[int] | None = None) -> dict[tuple[str, int], TrainResult]:
+                 seeds: list[int] | None = None, protocol: str = "paper") -> dict[tuple[str, int], TrainResult]:
     """Train (or load from cache / resume) every model of ``study`` for every seed.
 
-    Writes ``tables/<study>_training_curves.csv`` with one row per model, seed and epoch
+    Writes ``tables/<curves_name>.csv`` with one row per model, seed and epoch
     (only when the whole set is trained; ``kinds`` / ``seeds`` pick a subset, as the
     command line below does to spread training over processes or sessions).
     """
     spec = STUDIES[study]
     device = pick_device(P.device)
-    train, val = spec["data"](P, "train"), spec["data"](P, "val")
-    data_key = param_hash(spec["key"](P))
+    train, val = spec["data"](P, "train", None, protocol), spec["data"](P, "val", None, protocol)
+    data_key = param_hash(spec["key"](P, protocol))
     results, curves = {}, []
     for kind in kinds or study_models(P, study):
         for seed in seeds or P.seeds:
-            res = train_model(model_config(study, kind, P), train, val, train_config(P, study, kind, seed),
-                              checkpoint_stem(P, study, kind, seed), data_key=data_key, device=device,
+            res = train_model(model_config(study, kind, P, protocol), train, val,
+                              train_config(P, study, kind, seed, protocol),
+                              checkpoint_stem(P, study, kind, seed, protocol), data_key=data_key, device=device,
                               progress=progress)
             results[(kind, seed)] = res
             curve = history_frame(res.history)
@@ -164,16 +200,18 @@ def train_models(P, study: str, progress: bool = True, kinds: list[str] | None =
             curve.insert(0, "model", kind)
             curves.append(curve)
     if kinds is None and seeds is None:
-        atomic_write_csv(tables_dir(P.profile) / f"{study}_training_curves.csv", pd.concat(curves, ignore_index=True))
+        atomic_write_csv(tables_dir(P.profile) / f"{curves_name(study, protocol)}.csv",
+                         pd.concat(curves, ignore_index=True))
     return results
 
 
-def trained_models(P, study: str, progress: bool = False) -> dict[tuple[str, int], Any]:
+def trained_models(P, study: str, progress: bool = False, protocol: str = "paper") -> dict[tuple[str, int], Any]:
     """The best checkpoint of every (model, seed), loaded in eval mode (trains what is missing)."""
     from drfkit.train import load_checkpoint
 
     device = pick_device(P.device)
-    return {key: load_checkpoint(res.best_path, device) for key, res in train_models(P, study, progress).items()}
+    return {key: load_checkpoint(res.best_path, device)
+            for key, res in train_models(P, study, progress, protocol=protocol).items()}
 
 
 # ------------------------------------------------------------------------ command line
@@ -200,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--models", nargs="*", help="model kinds (default: the profile's)")
     parser.add_argument("--seeds", nargs="*", type=int, help="model seeds (default: the profile's)")
     parser.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
+    parser.add_argument("--protocol", default="paper", choices=sorted(PROTOCOLS),
+                        help="training protocol (drfkit.protocols): the paper's or the book's")
     parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
                         help="override profile values (VALUE in YAML), e.g. pend_patience=0 to train "
                              "runs that the early stop ended on to the last epoch")
@@ -219,7 +259,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2
     setup(args.threads or P.threads, P.seeds[0], P.device)
-    results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None)
+    results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None,
+                           protocol=args.protocol)
     for (kind, seed), res in results.items():
         print(f"{args.study} {kind} seed {seed}: {res.best_path}")
     return 0

@@ -21,13 +21,22 @@ from typing import Any
 
 import torch
 
-from drfkit.io import CorruptArtefactError, atomic_torch_save, param_hash, torch_load_checked
+from drfkit.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
 
 CHECKPOINT_FORMAT = 1
 
 
 class NonFiniteLossError(RuntimeError):
     """The loss or a gradient became NaN/inf; the last good checkpoint is kept."""
+
+
+class ResumeMismatchError(RuntimeError):
+    """An unfinished run would continue under a setting that changes its numbers (thread count)."""
+
+
+# A second process on a finished checkpoint waits this long for the lock (a cache hit holds it for
+# milliseconds); a run that is training holds it for hours, so waiting longer would only hide that.
+LOCK_WAIT_S = 10.0
 
 
 @dataclass
@@ -181,14 +190,42 @@ def train_model(
     If ``<stem>-last.pt`` exists and was made by the same configuration (its fingerprint
     matches), training resumes from it; a finished run returns at once. ``stop_after_epochs``
     ends the call early (as an interruption would), used by tests and by time-boxed runs.
+
+    One writer per checkpoint: the call holds an OS lock on ``<stem>``; a second process gets a
+    ``LockedError`` naming the holder (after LOCK_WAIT_S) and writes nothing. ``-last.pt`` also
+    keeps the best epoch's weights, so a lost or corrupt ``-best.pt`` is restored from it.
+    An unfinished CPU run resumes only with the torch thread count it was trained with
+    (``ResumeMismatchError`` otherwise): float sums split over threads round differently.
     """
+    stem = Path(checkpoint_stem)
+    with exclusive_lock(stem.parent / f".{stem.name}.lock", f"checkpoint {stem}", wait_s=LOCK_WAIT_S):
+        return _train_locked(model_config, train, val, cfg, stem, data_key=data_key, device=device,
+                             progress=progress, stop_after_epochs=stop_after_epochs)
+
+
+def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None) -> None:
+    """Make sure ``best_path`` holds a readable checkpoint, rewriting it from ``-last.pt``'s copy."""
+    if best_path.exists():
+        try:
+            torch_load_checked(best_path)
+            return
+        except CorruptArtefactError:
+            pass
+    if best is None:
+        raise CorruptArtefactError(
+            f"{best_path} is missing or corrupt and {last_path} was written before the best weights were kept "
+            f"in it, so they cannot be restored: delete {last_path} too to retrain the run")
+    atomic_torch_save(best_path, best)
+
+
+def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, data_key, device, progress,
+                  stop_after_epochs) -> TrainResult:
     from drfkit.models import build_model
 
     device = torch.device(device)
-    stem = Path(checkpoint_stem)
     last_path, best_path = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
     fp = fingerprint(model_config, cfg, data_key)
-    for stale in stem.parent.glob(f".{stem.name}-*.tmp"):  # left by a run killed mid-write
+    for stale in stem.parent.glob(f".{stem.name}-*.tmp"):  # left by a killed run; the lock says none is live
         stale.unlink(missing_ok=True)
     if cfg.framewise:
         train, val = train.frames(), val.frames()
@@ -198,7 +235,7 @@ def train_model(
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
     result = TrainResult(best_path=best_path, last_path=last_path)
-    start_epoch = 0
+    start_epoch, best = 0, None
 
     if last_path.exists():
         state = torch_load_checked(last_path)
@@ -216,9 +253,19 @@ def train_model(
         result.history = state["history"]
         result.best_epoch, result.best_val_loss = state["best_epoch"], state["best_val_loss"]
         result.resumed_from = start_epoch
-        if run_finished(start_epoch, result.best_epoch, cfg) and best_path.exists():
+        best = state.get("best")
+        _restore_best(best_path, last_path, best)
+        if run_finished(start_epoch, result.best_epoch, cfg):
             result.stopped_early = start_epoch < cfg.epochs
             return result  # finished: a cache hit
+        threads = state.get("threads")
+        if device.type == "cpu" and state.get("device_type", "cpu") == "cpu" and threads is not None \
+                and threads != torch.get_num_threads():
+            raise ResumeMismatchError(
+                f"{last_path} was trained with {threads} torch thread(s) and would resume with "
+                f"{torch.get_num_threads()}; the thread count changes the numbers, so resume with {threads} "
+                f"(python -m drfkit.studies ... --threads {threads}, or threads: {threads} in the profile), "
+                f"or delete {last_path} to retrain from scratch")
 
     bar = None
     if progress:
@@ -260,17 +307,19 @@ def train_model(
                                "device": trained_on})
         if val_loss < result.best_val_loss:
             result.best_val_loss, result.best_epoch = val_loss, epoch + 1
-            atomic_torch_save(best_path, {
-                "format": CHECKPOINT_FORMAT, "config": model_config, "state_dict": model.state_dict(),
-                "meta": {"epoch": epoch + 1, "val_loss": val_loss, "seed": cfg.seed, "fingerprint": fp,
-                         "train": vars(cfg), "data": data_key}})
+            best = {"format": CHECKPOINT_FORMAT, "config": model_config,
+                    "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
+                    "meta": {"epoch": epoch + 1, "val_loss": val_loss, "seed": cfg.seed, "fingerprint": fp,
+                             "train": vars(cfg), "data": data_key}}
+            atomic_torch_save(best_path, best)
         atomic_torch_save(last_path, {
             "format": CHECKPOINT_FORMAT, "fingerprint": fp, "epoch": epoch + 1,
             "model": model.state_dict(), "optimiser": optimiser.state_dict(),
             "scheduler": scheduler.state_dict(), "rng_torch": torch.get_rng_state(),
             "rng_cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
             "history": result.history, "best_epoch": result.best_epoch,
-            "best_val_loss": result.best_val_loss})
+            "best_val_loss": result.best_val_loss, "best": best,
+            "threads": torch.get_num_threads(), "device_type": device.type})
         if bar is not None:
             bar.update(1)
             bar.set_postfix(train=f"{train_loss:.3f}", val=f"{val_loss:.3f}", refresh=False)
@@ -348,5 +397,5 @@ def count_parameters(model) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "train_model", "run_finished", "naming_fields",
+__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "ResumeMismatchError", "train_model", "run_finished", "naming_fields",
            "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "history_frame", "count_parameters"]

@@ -147,12 +147,44 @@ def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
     assert "| C6 |" in text
     # the claims no notebook has filled yet are named, with where they come from
     assert "Not evaluated yet in this profile: C1 (notebook 03, pendulum); C2" in text
-    assert "C4 (" not in text and "C6 (" not in text and "C7b (notebook 05, pedestrians)." in text
+    assert "C4 (" not in text and "C6 (" not in text and "C7b (notebook 05, pedestrians); F1" in text
+
+
+def test_claims_carry_their_protocol_and_old_tables_read_as_the_papers(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    (tmp_path / "t").mkdir()
+    old = pd.DataFrame([claims.c6_speedup(3.0)])[["id", "claim", "paper", "ours", "rule", "verdict"]]
+    old.to_csv(tmp_path / "t" / "claims.csv", index=False)   # a table from before the protocol column
+    claims.upsert("t", [claims.c6_speedup(1.0)], protocol="book")
+    table = pd.read_csv(tmp_path / "t" / "claims.csv")
+    assert list(zip(table["id"], table["protocol"], table["verdict"])) == [
+        ("C6", "paper", claims.REPRODUCED), ("C6", "book", claims.NOT)]
+    claims.upsert("t", [claims.c6_speedup(2.0)], protocol="paper")
+    table = pd.read_csv(tmp_path / "t" / "claims.csv")
+    assert list(zip(table["protocol"], table["verdict"])) == [("paper", claims.PARTLY), ("book", claims.NOT)]
+    assert "| C6 | book |" in (tmp_path / "t" / "claims.md").read_text()
+
+
+def test_filter_mechanism_and_coasting_verdicts():
+    def mech(rho, ratio, prior):
+        return pd.DataFrame({"model": ["drf", "drf", "lstm"], "r_noise_spearman": [rho, rho, 0.0],
+                             "gain_ratio_blackout": [ratio, ratio, float("nan")], "prior_ratio": [prior, prior, float("nan")]})
+    assert claims.f1_filter_mechanism(mech(0.9, 0.2, 0.8), 0.75)["verdict"] == claims.REPRODUCED
+    assert claims.f1_filter_mechanism(mech(0.9, 0.9, 8.0), 0.75)["verdict"] == claims.PARTLY
+    assert claims.f1_filter_mechanism(mech(0.05, 0.92, 7.9), 0.75)["verdict"] == claims.NOT
+
+    def dark(drf):
+        return pd.DataFrame({"model": ["drf", "lstm", "no_dynamics", "physics_bound"], "seed": [0] * 4,
+                             "mae_blackout": [drf, 0.5, 0.6, 0.03]})
+    assert claims.f2_blackout_coasting(dark(0.08), 0.03)["verdict"] == claims.REPRODUCED
+    assert claims.f2_blackout_coasting(dark(0.3), 0.03)["verdict"] == claims.PARTLY
+    row = claims.f2_blackout_coasting(dark(0.55), 0.03)
+    assert row["verdict"] == claims.NOT and "physics_bound" not in row["ours"] and "bound 0.030" in row["ours"]
 
 
 def test_claims_md_names_no_missing_claim_once_all_are_filled(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    rows = [dict(zip(claims.COLUMNS, [cid, "c", "p", "o", "r", claims.PARTLY])) for cid in claims.CLAIM_SOURCES]
+    rows = [dict(zip(claims.COLUMNS, [cid, "paper", "c", "p", "o", "r", claims.PARTLY])) for cid in claims.CLAIM_SOURCES]
     claims.upsert("t", rows)
     assert "Not evaluated yet" not in (tmp_path / "t" / "claims.md").read_text()
 
@@ -176,3 +208,12 @@ def test_paper_comparison_pairs_ours_with_the_paper():
     assert row["paper"] == PENDULUM_MAE[0.75]["drf"] and row["ours_over_paper"] == pytest.approx(0.05 / 0.0426968253)
     # levels the paper does not report are left out
     assert paper_comparison(summary.assign(noise=0.3), PENDULUM_MAE).empty
+
+
+def test_summary_intervals_stay_inside_each_metrics_range():
+    from drfkit.evaluate import summarise
+
+    frame = pd.DataFrame({"model": ["a", "a"], "mae": [0.001, 0.2], "picp": [0.99, 0.6], "nll": [-3.0, 5.0]})
+    row = summarise(frame, ["model"]).iloc[0]
+    assert row["mae_lo"] == 0.0 and row["picp_hi"] == 1.0          # 2 seeds: a very wide t-interval, clipped
+    assert row["mae_ci"] > row["mae"] and row["nll_lo"] < -3.0       # the half-width itself is kept; NLL unbounded

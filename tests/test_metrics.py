@@ -12,7 +12,7 @@ from drfkit.metrics import (
 )
 
 
-# --------------------------------------------------------------------------- reference values (REFERENCE.md §6)
+# --------------------------------------------------------------------------- reference values (textbook definitions: Gneiting & Raftery 2007 for CRPS)
 
 @pytest.mark.parametrize("mu", [0.0, -3.7, 12.5])
 def test_crps_and_nll_reference_values(mu):

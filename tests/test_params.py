@@ -153,3 +153,16 @@ def test_notebook_stops_in_its_first_cell_on_an_unknown_parameter(tmp_path):
     executed = [c for c in nb["cells"] if c["cell_type"] == "code" and c.get("execution_count")]
     # parameters, injected parameters, validation: nothing after the validation cell ran
     assert len(executed) <= 3
+
+
+def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path):
+    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+
+    values = load_profile("quick") | {"ped_source": "nuscenes", "nuscenes_root": str(tmp_path), "pifpaf_predictions": ""}
+    with pytest.raises(ParameterError, match="needs 'pifpaf_predictions' in the profile"):
+        validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
+    values["pifpaf_predictions"] = str(tmp_path / "absent")
+    with pytest.raises(ParameterError, match="'pifpaf_predictions' = .*absent' is not a folder"):
+        validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
+    values["pifpaf_predictions"] = str(tmp_path)
+    assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).ped_source == "nuscenes"

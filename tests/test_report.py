@@ -109,3 +109,25 @@ def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, mon
                      "note": "killed during 05_competency_gating"}}))
     text = results_section("p", "make reproduce", False)
     assert "status interrupted: killed during 05_competency_gating" in text and "None s" not in text
+
+
+def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path):
+    from drfkit.report import dynamics_lines
+
+    assert dynamics_lines(tmp_path) == []
+    pd.DataFrame({"protocol": ["paper", "book"], "model": ["drf", "drf"], "seed": [0, 0], "mae_0.5": [0.02, 0.01],
+                  "mae_blackout": [0.55, 0.08], "mae_after_blackout": [0.1, 0.02], "r_noise_spearman": [0.05, 0.9],
+                  "gain_ratio_blackout": [0.92, 0.2], "prior_ratio": [7.9, 0.7]}).to_csv(tmp_path / "pendulum_protocols.csv",
+                                                                                       index=False)
+    pd.DataFrame({"seed": [0, 0], "noise": ["0.5", "blackout"], "mae": [0.006, 0.033]}).to_csv(
+        tmp_path / "pendulum_physics_bound.csv", index=False)
+    text = "\n".join(dynamics_lines(tmp_path))
+    assert "| paper | DRF (ours) | 0.0200 | 0.5500 | 0.05 | 0.92 | 7.90 |" in text
+    assert "| book | DRF (ours) | 0.0100 | 0.0800 | 0.90 | 0.20 | 0.70 |" in text
+    assert "| — | true-physics bound | 0.0060 | 0.0330 |" in text
+    pd.DataFrame({"variant": ["book", "book", "paper"], "kind": ["drf"] * 3, "seed": [0, 1, 0], "budget": ["small"] * 3,
+                  "mae_0.5": [0.01, 0.03, 0.02], "mae_blackout": [0.1, 0.2, 0.5]}).to_csv(tmp_path / "pendulum_ablation.csv",
+                                                                                       index=False)
+    text = "\n".join(dynamics_lines(tmp_path))
+    assert "budget small" in text and "| book | DRF (ours) | 2 | 0.02 |" in text
+    assert text.index("| book | DRF (ours) | 2") < text.index("| paper | DRF (ours) | 1")

@@ -237,3 +237,82 @@ def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
     assert best.checkpoint_meta["epoch"] == 1 and last.checkpoint_meta["epoch"] == 3 and not last.training
     assert state_equal(last.state_dict(), torch_load_checked(res.last_path)["model"])
     assert not state_equal(last.state_dict(), best.state_dict())
+
+
+def test_a_second_process_on_a_training_checkpoint_is_refused_and_writes_nothing(tmp_path):
+    """Two real processes on one checkpoint: the second is refused with the holder named, the
+    first's temp files are never swept from under it, and the first finishes normally."""
+    from drfkit.io import LockedError
+
+    epochs = 25
+    stem = tmp_path / "shared"
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT), OMP_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "tests._train_worker", str(stem), str(epochs)],
+                            cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        last = Path(f"{stem}-last.pt")
+        deadline = time.time() + 120
+        while not (last.exists() and torch_load_checked(last)["epoch"] >= 1):
+            if proc.poll() is not None or time.time() > deadline:
+                pytest.fail(f"worker ended early: {proc.stderr.read().decode()[-2000:]}")
+            time.sleep(0.02)
+        train, val = tiny_data()
+        before = torch_load_checked(last)["epoch"]
+        import drfkit.train as train_module
+
+        with pytest.raises(LockedError, match=f"process {proc.pid} on"):
+            train_module.LOCK_WAIT_S, saved = 0.0, train_module.LOCK_WAIT_S
+            try:
+                train_model(model_config("pendulum", CONFIG_KIND), train, val, train_cfg(epochs=epochs), stem,
+                            progress=False)
+            finally:
+                train_module.LOCK_WAIT_S = saved
+        assert torch_load_checked(last)["epoch"] >= before
+        assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert torch_load_checked(last)["epoch"] == epochs
+    # once the first has finished, the same call is a cache hit
+    train, val = tiny_data()
+    assert train_model(model_config("pendulum", CONFIG_KIND), train, val, train_cfg(epochs=epochs), stem,
+                       progress=False).resumed_from == epochs
+
+
+@pytest.mark.parametrize("damage", ["delete", "truncate"])
+def test_a_lost_or_corrupt_best_checkpoint_is_restored_from_last(tmp_path, damage):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    res = train_model(cfg, train, val, train_cfg(epochs=2), tmp_path / "r", progress=False)
+    good = torch_load_checked(res.best_path)
+    if damage == "delete":
+        res.best_path.unlink()
+    else:
+        res.best_path.write_bytes(res.best_path.read_bytes()[:100])
+    again = train_model(cfg, train, val, train_cfg(epochs=2), tmp_path / "r", progress=False)
+    assert again.resumed_from == 2   # nothing retrained
+    assert state_equal(good["state_dict"], load_checkpoint(again.best_path).state_dict())
+    # a -last.pt from before the best weights were kept in it: the message says what to delete
+    state = torch_load_checked(res.last_path)
+    del state["best"]
+    torch.save(state, res.last_path)
+    res.best_path.unlink()
+    with pytest.raises(CorruptArtefactError, match="delete .*-last.pt too"):
+        train_model(cfg, train, val, train_cfg(epochs=2), tmp_path / "r", progress=False)
+    # a corrupt -last.pt: the same clear error type, naming the file
+    res.last_path.write_bytes(b"not a checkpoint")
+    with pytest.raises(CorruptArtefactError, match="r-last.pt is truncated or corrupt"):
+        train_model(cfg, train, val, train_cfg(epochs=2), tmp_path / "r", progress=False)
+
+
+def test_an_unfinished_run_resumes_only_with_its_thread_count(tmp_path):
+    from drfkit.train import ResumeMismatchError
+
+    train, val = tiny_data()
+    cfg = model_config("pendulum", CONFIG_KIND)
+    train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "t", progress=False, stop_after_epochs=1)
+    torch.set_num_threads(2)
+    with pytest.raises(ResumeMismatchError, match=r"trained with 1 torch thread\(s\) and would resume with 2.*--threads 1"):
+        train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "t", progress=False)
+    torch.set_num_threads(1)
+    assert train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "t", progress=False).resumed_from == 1

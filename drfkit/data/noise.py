@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# Benchmark constants (REFERENCE.md §2).
+# Benchmark constants (the RKN pendulum benchmark, Becker et al. 2019).
 RANDOM_WALK_STEP = 0.2  # f_{t+1} = clip(f_t + U(-0.2, 0.2), 0, 1)
 T1_RANGE = (0.0, 0.25)  # lower threshold of the per-sequence rescaling
 T2_RANGE = (0.75, 1.0)  # upper threshold

@@ -11,7 +11,7 @@ Conventions (every angle in this module follows them)
   image terms cos theta is the tip's downward offset and sin theta its rightward one.
   (The benchmark itself stores (sin, cos); only the order differs.)
 
-Physics (REFERENCE.md §2, kept exactly as the benchmark has it)
+Physics (kept exactly as the benchmark has it)
 ---------------------------------------------------------------
 The benchmark integrates the angle phi measured from *upright* (phi = theta + pi):
 ``phi'' = c sin(phi) - friction * phi'`` with ``c = g * l * m / I`` and ``I = m l^2 / 3``,
@@ -277,3 +277,63 @@ def _check_generation_args(n_sequences, seq_len, max_noise, seed) -> None:
         raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
     if seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed}")
+
+
+# Frames of the blackout test: 15 frames of pure noise in the middle of a 75-frame sequence,
+# long enough (about 2/3 of a swing) that only a model of the motion can bridge them.
+BLACKOUT_FRAMES = (30, 45)
+
+
+def blackout_frames(seq_len: int) -> tuple[int, int]:
+    """BLACKOUT_FRAMES for sequences of at least 60 frames (15 frames after the blackout to
+    watch the recovery); for shorter ones the same shape scaled: frames [0.4 T, 0.6 T)."""
+    if seq_len >= 60:
+        return BLACKOUT_FRAMES
+    if seq_len < 10:
+        raise ValueError(f"a blackout test needs sequences of at least 10 frames, got {seq_len}")
+    return int(0.4 * seq_len), int(0.6 * seq_len)
+
+
+def with_blackout(arrays: dict[str, np.ndarray], start: int, stop: int, seed: int) -> dict[str, np.ndarray]:
+    """A copy of a ``generate_pendulum`` split whose frames [start, stop) are pure uniform noise
+    (noise level 1, independent of the image) in every sequence; 'noise' says 1.0 there."""
+    images = arrays["images"]
+    if not 0 <= start < stop <= images.shape[1]:
+        raise ValueError(f"blackout frames [{start}, {stop}) must lie inside the {images.shape[1]} frames "
+                         "of the sequences; use shorter windows or longer sequences")
+    out = dict(arrays)
+    rng = np.random.default_rng(seed)
+    out["images"], out["noise"] = images.copy(), arrays["noise"].copy()
+    window = out["images"][:, start:stop]
+    out["images"][:, start:stop] = blend_uniform_noise(window, np.ones(window.shape[:2]), rng)
+    out["noise"][:, start:stop] = 1.0
+    return out
+
+
+def with_random_blackouts(arrays: dict[str, np.ndarray], fraction: float, lengths: tuple[int, int],
+                          seed: int, first_frame: int = 5) -> dict[str, np.ndarray]:
+    """Training-time corruption: in a ``fraction`` of the sequences (drawn with ``seed``), one
+    window of pure-noise frames, its length uniform in ``lengths`` (inclusive, capped at
+    T - first_frame) and its start
+    uniform in [first_frame, T - length]. Without such frames every frame is informative at
+    low max noise and a model can do well without ever carrying its state forward."""
+    if not 0.0 <= float(fraction) <= 1.0:
+        raise ValueError(f"fraction must lie in [0, 1], got {fraction!r}")
+    n, steps = arrays["images"].shape[:2]
+    if not 1 <= lengths[0] <= lengths[1] or steps <= first_frame:
+        raise ValueError(f"blackout lengths {lengths} must satisfy 1 <= lo <= hi, and sequences ({steps} frames) "
+                         f"must be longer than first_frame = {first_frame}")
+    hi = min(lengths[1], steps - first_frame)  # short sequences: windows capped at what fits
+    lo = min(lengths[0], hi)
+    rng = np.random.default_rng(seed)
+    chosen = rng.random(n) < fraction
+    length = rng.integers(lo, hi + 1, size=n)
+    start = first_frame + (rng.random(n) * (steps - first_frame - length + 1)).astype(np.int64)
+    frames = np.arange(steps)
+    dark = chosen[:, None] & (frames >= start[:, None]) & (frames < (start + length)[:, None])   # (N, T)
+    out = dict(arrays)
+    out["images"], out["noise"] = arrays["images"].copy(), arrays["noise"].copy()
+    pure = blend_uniform_noise(arrays["images"][dark], np.ones(int(dark.sum())), rng)
+    out["images"][dark] = pure
+    out["noise"][dark] = 1.0
+    return out

@@ -7,6 +7,8 @@ Shapes: B batch, T time, N = B*T frames, n latent size, S Monte Carlo samples.
 """
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -125,20 +127,38 @@ def check_keypoints(keypoints: torch.Tensor) -> None:
         raise TypeError(f"keypoints must be float32 (x, y, confidence), got {keypoints.dtype}")
 
 
+# The bounded log-variance head's range: r in [1e-3, 1e3] around the start r = 1. Six decades
+# let r follow frame quality from a sharp frame (gain near 1) to pure noise (gain near 0); the
+# paper's ELU + 1 head grows only linearly, so reaching r = 1e3 needs weights 1000x the start.
+LOG_R_RANGE = (math.log(1e-3), math.log(1e3))
+NOISE_HEADS = ("elu", "log")
+
+
 class ObservationHeads(nn.Module):
     """Features (..., D) -> latent observation w (..., n) and the diagonal r of R (..., n).
 
-    w = LayerNorm(Linear1(x)); r = ELU(Linear2(x)) + 1 (+ VARIANCE_FLOOR).
+    w = LayerNorm(Linear1(x));
+    r = ELU(Linear2(x)) + 1 (+ VARIANCE_FLOOR)              ``noise_head='elu'`` (the paper's), or
+    log r = lo + (hi - lo) * sigmoid(Linear2(x))             ``noise_head='log'``, (lo, hi) = LOG_R_RANGE.
     """
 
-    def __init__(self, in_dim: int, latent: int = 30):
+    def __init__(self, in_dim: int, latent: int = 30, noise_head: str = "elu"):
         super().__init__()
+        if noise_head not in NOISE_HEADS:
+            raise ValueError(f"noise_head must be one of {NOISE_HEADS}, got {noise_head!r}")
+        self.noise_head = noise_head
         self.linear1 = nn.Linear(in_dim, latent)
         self.norm = nn.LayerNorm(latent)
         self.linear2 = nn.Linear(in_dim, latent)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.norm(self.linear1(x)), positive_elu(self.linear2(x), VARIANCE_FLOOR)
+        pre = self.linear2(x)
+        if self.noise_head == "log":
+            lo, hi = LOG_R_RANGE
+            r = torch.exp(lo + (hi - lo) * torch.sigmoid(pre))
+        else:
+            r = positive_elu(pre, VARIANCE_FLOOR)
+        return self.norm(self.linear1(x)), r
 
 
 def mean_and_log_variance(mean: torch.Tensor, variance: torch.Tensor) -> torch.Tensor:

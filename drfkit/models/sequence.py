@@ -26,8 +26,9 @@ import torch
 from torch import nn
 
 from drfkit.filter import kalman_step
-from drfkit.models.parts import (IMAGE_DOWNSAMPLES, Decoder, ImageEncoder, KeypointEncoder, ObservationHeads,
-                                 check_dropout_p, mean_and_log_variance)
+from drfkit.models.basis import BasisTransition
+from drfkit.models.parts import (IMAGE_DOWNSAMPLES, NOISE_HEADS, Decoder, ImageEncoder, KeypointEncoder,
+                                 ObservationHeads, check_dropout_p, mean_and_log_variance)
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 
 INPUT_KINDS = ("pendulum", "keypoints")
@@ -139,7 +140,7 @@ class _EncodedSequenceModel(SequenceModel):
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  feature_dim: int = 64, decoder_hidden: int = 64, dropout_p: float = 0.1,
                  image_downsample: str = "pool", target_offset: float = 0.0, target_scale: float = 1.0,
-                 _extra_config: dict[str, Any] | None = None):
+                 noise_head: str = "elu", _extra_config: dict[str, Any] | None = None):
         if input_kind not in INPUT_KINDS:
             raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
         for name, value in (("out_dim", out_dim), ("latent", latent), ("feature_dim", feature_dim),
@@ -149,14 +150,19 @@ class _EncodedSequenceModel(SequenceModel):
         check_dropout_p(dropout_p)
         if image_downsample not in IMAGE_DOWNSAMPLES:
             raise ValueError(f"image_downsample must be one of {IMAGE_DOWNSAMPLES}, got {image_downsample!r}")
+        if noise_head not in NOISE_HEADS:
+            raise ValueError(f"noise_head must be one of {NOISE_HEADS}, got {noise_head!r}")
+        # options of the book's protocol enter the config only when they differ from the
+        # paper's, so configs (and the checkpoint names hashed from them) made before stay as they were
+        extra = dict(_extra_config or {}) | ({"noise_head": noise_head} if noise_head != "elu" else {})
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, latent=latent,
                               feature_dim=feature_dim, decoder_hidden=decoder_hidden,
                               dropout_p=dropout_p, image_downsample=image_downsample,
                               target_offset=float(target_offset), target_scale=float(target_scale),
-                              **(_extra_config or {})))
+                              **extra))
         self.latent = latent
         self.encoder = make_encoder(input_kind, feature_dim, image_downsample)
-        self.heads = ObservationHeads(feature_dim, latent)
+        self.heads = ObservationHeads(feature_dim, latent, noise_head)
         self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale)
 
     def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -197,6 +203,13 @@ class LSTMBaseline(_EncodedSequenceModel):
         return h, None
 
 
+TRANSITION_KINDS = ("lstm", "basis")
+# Observation variance of a memory dimension: the gain on its own (zero) observation is
+# P / (P + MEMORY_VARIANCE) ~ 1e-4, i.e. unobserved up to a leak far below what training moves
+# (H = [I 0] in the limit). Kept finite so the filter's Cholesky path is the same for every dim.
+MEMORY_VARIANCE = 1e4
+
+
 class DeepRecursiveFilter(_EncodedSequenceModel):
     """The paper's DRF: a Kalman filter on the learned latent state.
 
@@ -209,6 +222,14 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     The filter is causal: padding must trail a sequence's valid frames.
     In training the loop runs as one autograd node (``drfkit.models.recursion``), at
     inference step by step; both compute the same values (tests/test_recursion.py).
+
+    Options of the book's protocol (defaults: the paper's model):
+      ``transition_kind='basis'``  F_t from a softmax mixture of learned matrices on z_{t-1} alone
+                                   (``drfkit.models.basis``; no memory outside the filter state)
+      ``memory_dims=m``            the last m latent dims are never observed (w = 0, r =
+                                   MEMORY_VARIANCE; at t = 0 the prior z = 0, P = 1): room in
+                                   the state for what one frame cannot show, such as velocity
+      ``noise_head='log'``         r on a bounded log scale (``ObservationHeads``)
     """
 
     kind = "drf"
@@ -217,13 +238,38 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     whole_sequence = True
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
-                 transition_hidden: int = 64, **kwargs: Any):
+                 transition_hidden: int = 64, transition_kind: str = "lstm", n_basis: int = 16,
+                 memory_dims: int = 0, **kwargs: Any):
         if isinstance(transition_hidden, bool) or not isinstance(transition_hidden, int) \
                 or transition_hidden < 1:
             raise ValueError(f"transition_hidden must be a positive int, got {transition_hidden!r}")
-        super().__init__(input_kind, out_dim, latent,
-                         _extra_config={"transition_hidden": transition_hidden}, **kwargs)
-        self.transition = TransitionNetwork(latent, transition_hidden)
+        if transition_kind not in TRANSITION_KINDS:
+            raise ValueError(f"transition_kind must be one of {TRANSITION_KINDS}, got {transition_kind!r}")
+        if isinstance(memory_dims, bool) or not isinstance(memory_dims, int) or not 0 <= memory_dims < latent:
+            raise ValueError(f"memory_dims must be an int in [0, latent = {latent}), got {memory_dims!r}")
+        extra: dict[str, Any] = {"transition_hidden": transition_hidden}
+        if transition_kind != "lstm":  # as noise_head: only what departs from the paper enters the config
+            extra |= {"transition_kind": transition_kind, "n_basis": n_basis}
+        if memory_dims:
+            extra["memory_dims"] = memory_dims
+        super().__init__(input_kind, out_dim, latent, _extra_config=extra, **kwargs)
+        self.transition_kind, self.memory_dims = transition_kind, memory_dims
+        if transition_kind == "basis":
+            self.transition = BasisTransition(latent, transition_hidden, n_basis)
+        else:
+            self.transition = TransitionNetwork(latent, transition_hidden)
+
+    def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        w, r = super().observe(inputs)
+        m = self.memory_dims
+        if not m:
+            return w, r
+        observed = torch.arange(self.latent, device=w.device) < self.latent - m          # (n,)
+        first = torch.zeros(w.shape[1], 1, dtype=torch.bool, device=w.device)
+        first[0] = True                                                                   # (T, 1)
+        w = torch.where(observed, w, 0.0)
+        r = torch.where(observed, r, torch.where(first, 1.0, MEMORY_VARIANCE))
+        return w, r
 
     def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
                    whole_sequence: bool | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
@@ -231,18 +277,29 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
 
         Returns posterior means z (B, T, n), posterior variances diag(P) (B, T, n) and,
         if asked, the gains K (B, T, n, n) (else None). When gradients are wanted (training)
-        and gains are not, the recursion runs as one autograd node with a hand-written
-        backward (``drfkit.models.recursion``); ``whole_sequence=False`` (default: the
-        ``whole_sequence`` attribute) forces the per-step loop below, which autograd
-        differentiates step by step (same values; the tests compare the two). Inference always
-        takes the per-step loop.
+        and gains are not, the LSTM transition's recursion runs as one autograd node with a
+        hand-written backward (``drfkit.models.recursion``); ``whole_sequence=False`` (default:
+        the ``whole_sequence`` attribute) forces the per-step loop below, which autograd
+        differentiates step by step (same values; the tests compare the two). Inference and
+        the basis transition always take the per-step loop.
         """
         check_observations(w, r, self.latent)
         whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
-        if whole_sequence and not return_gains and torch.is_grad_enabled() and (
+        if whole_sequence and self.transition_kind == "lstm" and not return_gains and torch.is_grad_enabled() and (
                 w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
             z, p_diag = drf_recursion(self.transition, w, r)
             return z, p_diag, None
+        trace = self.filter_steps(w, r, return_gains=return_gains)
+        return trace["z"], trace["p_diag"], trace.get("gains")
+
+    def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
+                     return_transition: bool = False) -> dict[str, torch.Tensor]:
+        """The per-step filter loop on w, r (B, T, n), recording what was asked.
+
+        Always: 'z', 'p_diag' (B, T, n). ``return_gains``: 'gains' K (B, T, n, n), I at t = 0.
+        ``return_transition``: 'F' (B, T-1, n, n), F_t for t = 1..T-1; 'q' (B, T-1, n); 'z_prior'
+        (B, T-1, n) = F_t z_{t-1}, the prediction of z_t before w_t is seen.
+        """
         batch, steps, n = w.shape
         # unbind once: indexing w[:, t] in the loop would make the backward pass build
         # and sum T zero-padded (B, T, n) gradients, one per step
@@ -251,16 +308,26 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         P = torch.diag_embed(p_diag)
         means, variances = [z], [p_diag]
         gains = [self.transition.eye.expand(batch, n, n)] if return_gains else None
+        Fs, qs, priors = [], [], []
         state = self.transition.initial_state(batch, w)
         for t in range(1, steps):
             F_t, q_t, state = self.transition(z, state)
+            if return_transition:
+                Fs.append(F_t), qs.append(q_t), priors.append((F_t @ z.unsqueeze(-1)).squeeze(-1))
             z, P, K = kalman_step(z, P, F_t, q_t, w_steps[t], r_steps[t])
             means.append(z)
             variances.append(P.diagonal(dim1=-2, dim2=-1))
             if gains is not None:
                 gains.append(K)
-        stacked_gains = torch.stack(gains, dim=1) if gains is not None else None
-        return torch.stack(means, dim=1), torch.stack(variances, dim=1), stacked_gains
+        out = {"z": torch.stack(means, dim=1), "p_diag": torch.stack(variances, dim=1)}
+        if gains is not None:
+            out["gains"] = torch.stack(gains, dim=1)
+        if return_transition:
+            empty = w.new_empty(batch, 0, n)
+            out["F"] = torch.stack(Fs, dim=1) if Fs else w.new_empty(batch, 0, n, n)
+            out["q"] = torch.stack(qs, dim=1) if qs else empty
+            out["z_prior"] = torch.stack(priors, dim=1) if priors else empty
+        return out
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)

@@ -1,0 +1,71 @@
+"""Training protocols of the pendulum study, and every variant the protocol ablation tried.
+
+A *variant* is a model kind, its options (``drfkit.models``) and a training-time corruption;
+``drfkit.ablation`` trains each on a small budget and judges it on validation data. A
+*protocol* names one variant per model kind, so the three models of a comparison are trained
+the same way:
+
+* ``paper`` -- the paper as written: LSTM transition network, ELU + 1 observation variance,
+  every latent dim observed, training frames as the benchmark makes them.
+* ``book``  -- the book's protocol, chosen on validation data by the ablation (notebook 01):
+  a locally linear transition with no memory of its own (``drfkit.models.basis``), 15 of the 30
+  latent dims unobserved (room for velocity), r on a bounded log scale, and training sequences
+  with random pure-noise blackouts. The baselines get what applies to them (the r head and the
+  blackouts), so the comparison stays fair.
+
+Every variant stays listed, whether it helped or not: the ablation table shows them all.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+BLACKOUT_TRAINING = {"fraction": 0.5, "lengths": (5, 20)}
+BOOK_DRF = {"transition_kind": "basis", "memory_dims": 15, "noise_head": "log"}
+
+VARIANTS: dict[str, dict[str, Any]] = {
+    "paper": {"kind": "drf"},
+    "log_r": {"kind": "drf", "model": {"noise_head": "log"}},
+    "basis": {"kind": "drf", "model": {"transition_kind": "basis"}},
+    "memory": {"kind": "drf", "model": {"memory_dims": 15}},
+    "blackout": {"kind": "drf", "blackouts": BLACKOUT_TRAINING},
+    "basis_memory_log": {"kind": "drf", "model": BOOK_DRF},
+    "lstm_memory_log_blackout": {"kind": "drf", "model": {"memory_dims": 15, "noise_head": "log"},
+                                 "blackouts": BLACKOUT_TRAINING},
+    "book": {"kind": "drf", "model": BOOK_DRF, "blackouts": BLACKOUT_TRAINING},
+    "book_noise1": {"kind": "drf", "model": BOOK_DRF, "train_max_noise": 1.0},
+    "no_dynamics_paper": {"kind": "no_dynamics"},
+    "lstm_paper": {"kind": "lstm"},
+    "no_dynamics_book": {"kind": "no_dynamics", "model": {"noise_head": "log"}, "blackouts": BLACKOUT_TRAINING},
+    "lstm_book": {"kind": "lstm", "model": {"noise_head": "log"}, "blackouts": BLACKOUT_TRAINING},
+}
+
+# The ablation's budgets (``drfkit.ablation``); data from the profiles' pend_data_seed.
+ABLATION_BUDGETS: dict[str, dict[str, Any]] = {
+    # 480 Adam steps: 5-12 minutes per run on one CPU thread (two runs side by side on 2 cores)
+    "small": dict(train_sequences=300, val_sequences=100, seq_len=75, epochs=40, lr=1e-3, batch_size=25),
+    # ten times the steps, the full training set: the confirmation of a winner
+    "medium": dict(train_sequences=2000, val_sequences=200, seq_len=75, epochs=60, lr=3e-4, batch_size=50),
+    "tiny": dict(train_sequences=6, val_sequences=4, seq_len=48, epochs=1, lr=1e-3, batch_size=3),  # tests
+}
+
+PROTOCOLS: dict[str, dict[str, str]] = {
+    "paper": {"drf": "paper", "no_dynamics": "no_dynamics_paper", "lstm": "lstm_paper"},
+    "book": {"drf": "book", "no_dynamics": "no_dynamics_book", "lstm": "lstm_book"},
+}
+
+
+def variant_spec(name: str) -> dict[str, Any]:
+    """A variant with every field filled: kind, model (options), blackouts (None or a dict),
+    train_max_noise."""
+    if name not in VARIANTS:
+        raise ValueError(f"unknown variant {name!r}; choose from {sorted(VARIANTS)}")
+    return {"model": {}, "blackouts": None, "train_max_noise": 0.5} | VARIANTS[name]
+
+
+def protocol_spec(protocol: str, kind: str) -> dict[str, Any]:
+    """The variant that ``protocol`` trains for model ``kind``."""
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"unknown protocol {protocol!r}; choose from {sorted(PROTOCOLS)}")
+    if kind not in PROTOCOLS[protocol]:
+        raise ValueError(f"protocol {protocol!r} has no {kind!r} model; it trains {sorted(PROTOCOLS[protocol])}")
+    return variant_spec(PROTOCOLS[protocol][kind])

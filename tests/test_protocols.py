@@ -1,0 +1,95 @@
+"""Protocols and the protocol ablation: the paper's runs keep their names, the book's protocol
+changes exactly what it says, and an ablation row is trained once, on validation data only."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from drfkit import ablation, dynamics, studies
+from drfkit.params import load_profile, notebook_params, validate
+from drfkit.protocols import PROTOCOLS, VARIANTS, protocol_spec, variant_spec
+
+torch.set_num_threads(1)
+
+
+def quick(tmp_path, monkeypatch, **over):
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    values = load_profile("quick") | {"pend_train_sequences": 6, "pend_val_sequences": 3, "pend_test_sequences": 3,
+                                      "pend_seq_len": 12} | over
+    return validate("01_pendulum_training", notebook_params("01_pendulum_training", values))
+
+
+def test_every_protocol_names_a_variant_per_model():
+    for protocol, kinds in PROTOCOLS.items():
+        assert set(kinds) == {"drf", "no_dynamics", "lstm"}
+        for kind, variant in kinds.items():
+            assert VARIANTS[variant]["kind"] == kind
+    assert protocol_spec("paper", "drf") == {"kind": "drf", "model": {}, "blackouts": None, "train_max_noise": 0.5}
+    with pytest.raises(ValueError, match="unknown protocol"):
+        protocol_spec("fancy", "drf")
+    with pytest.raises(ValueError, match="unknown variant"):
+        variant_spec("nope")
+
+
+def test_paper_protocol_keeps_its_checkpoint_names_and_book_differs(tmp_path, monkeypatch):
+    P = quick(tmp_path, monkeypatch)
+    assert studies.checkpoint_stem(P, "pendulum", "drf", 0) == studies.checkpoint_stem(P, "pendulum", "drf", 0, "paper")
+    assert "noise_head" not in studies.model_config("pendulum", "drf", P)
+    book = studies.model_config("pendulum", "drf", P, "book")
+    assert book["transition_kind"] == "basis" and book["memory_dims"] == 15 and book["noise_head"] == "log"
+    assert studies.model_config("pendulum", "lstm", P, "book")["noise_head"] == "log"
+    assert "memory_dims" not in studies.model_config("pendulum", "lstm", P, "book")
+    for kind in ("drf", "lstm", "no_dynamics"):
+        assert studies.checkpoint_stem(P, "pendulum", kind, 0, "book") != studies.checkpoint_stem(P, "pendulum", kind, 0)
+    cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
+    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pend_book_epochs, P.pend_book_lr, P.pend_book_batch_size)
+    with pytest.raises(ValueError, match="only the paper's protocol"):
+        studies.model_config("pedestrians", "drf", None, "book")
+
+
+def test_book_protocol_blacks_out_training_sequences_only(tmp_path, monkeypatch):
+    P = quick(tmp_path, monkeypatch)
+    paper_train, book_train = studies.pendulum_data(P, "train"), studies.pendulum_data(P, "train", protocol="book")
+    changed = (paper_train.inputs != book_train.inputs).flatten(2).any(-1)          # (N, T) frames that differ
+    assert changed.any() and not changed[:, :5].any()
+    assert torch.equal(studies.pendulum_data(P, "val").inputs, studies.pendulum_data(P, "val", protocol="book").inputs)
+    assert torch.equal(paper_train.targets, book_train.targets)
+
+
+def test_protocol_table_joins_the_three_measurements():
+    evals = pd.DataFrame({"model": ["drf", "drf", "lstm", "lstm"], "seed": [0, 0, 0, 0], "noise": [0.5, 0.75] * 2,
+                          "mae": [0.1, 0.2, 0.3, 0.4]})
+    mech = pd.DataFrame({"model": ["drf", "lstm"], "seed": [0, 0], "r_noise_spearman": [0.9, 0.1],
+                         "gain_ratio_blackout": [0.2, np.nan]})
+    dark = pd.DataFrame({"model": ["drf", "lstm"], "seed": [0, 0], "mae_blackout": [0.05, 0.5],
+                         "mae_after_blackout": [0.01, 0.02]})
+    table = dynamics.protocol_table("book", evals, mech, dark).set_index("model")
+    assert table.loc["drf", "mae_0.75"] == 0.2 and table.loc["lstm", "mae_blackout"] == 0.5
+    assert table.loc["drf", "gain_ratio_blackout"] == 0.2 and np.isnan(table.loc["lstm", "prior_ratio"])
+    assert (table["protocol"] == "book").all()
+
+
+def test_ablation_row_is_trained_once_and_reused(tmp_path):
+    row = ablation.run_variant("book", 0, "tiny", tmp_path, progress=False)
+    assert row["variant"] == "book" and row["kind"] == "drf" and 0 < row["mae_0.5"] < 2
+    for key in ("mae_0.75", "mae_1", "mae_blackout", "r_noise_spearman", "gain_ratio_blackout", "prior_ratio"):
+        assert key in row
+    path = tmp_path / "tiny" / "book-seed0.json"
+    stamp = path.stat().st_mtime_ns
+    assert ablation.run_variant("book", 0, "tiny", tmp_path, progress=False) == json.loads(path.read_text())
+    assert path.stat().st_mtime_ns == stamp
+    assert not list(tmp_path.glob("data/*test*"))   # the ablation never builds a test split
+    ablation.run_variant("no_dynamics_book", 0, "tiny", tmp_path, progress=False)
+    table = ablation.ablation_table("tiny", tmp_path)
+    assert set(table["variant"]) == {"book", "no_dynamics_book"} and "mae_per_frame_blackout" not in table
+    summary = ablation.summarise_ablation(table)
+    assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
+
+
+def test_ablation_cli_rejects_unknown_variants(capsys):
+    assert ablation.main(["--variants", "nope", "--budget", "tiny"]) == 2
+    assert "unknown variant" in capsys.readouterr().err
