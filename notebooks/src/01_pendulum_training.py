@@ -279,6 +279,13 @@ save_table(P.profile, "pendulum_mechanism", mechanism)
 mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"]).round(3).T
 
 # %% [markdown]
+# In the paper profile (the paper's protocol, 3 seeds) the DRF's filter is inert: r barely follows the
+# frame's noise, the gain on pure-noise frames is about what it is on clean frames, and F_t has a
+# spectral radius near 2 and predicts the next observation several times worse than "no change". The
+# memory of the paper's DRF sits in the LSTM cells of its transition network, whose hidden state F_t
+# is computed from; nothing in the loss asks F to describe how the state moves.
+
+# %% [markdown]
 # ## The limit: a filter that knows the physics
 # **These references use knowledge no learned model has.** The *true-physics bound* is a causal
 # particle filter with the generator's own equations (`drfkit.oracle`: θ'' = −c sin θ − 0.1 θ',
@@ -355,6 +362,17 @@ ablation.summarise_ablation(table)
 assert set(table["variant"]) == set(P.ablation_variants) and table["mae_0.5"].gt(0).all()
 
 # %% [markdown]
+# What the paper profile's ablation shows (two seeds for the key variants): **blackout training is
+# the lever that makes a DRF coast**. No architecture change does without it -- the memory-free
+# basis transition with unobserved dims and log r alone learns an r that *falls* with the noise, and a
+# gain that does not drop on pure noise. With blackouts, the DRF's blackout error is several times
+# lower than that of the LSTM and no_dynamics trained the same way, and its gain falls on pure noise.
+# The mechanism is still only part-way there at this budget: r's rank correlation with the noise is
+# far below 0.8 and F does not yet predict the next clean observation better than "no change". The
+# book's protocol (`drfkit.protocols.PROTOCOLS['book']`) is the `book` variant; its paper-scale
+# confirmation is the table below once its runs are trained.
+
+# %% [markdown]
 # ## Both protocols side by side
 # The paper's protocol (the models above) and the book's (`drfkit.protocols`: the ablation's
 # `book` variant for the DRF, and what applies of it to the baselines, each on the book's schedule
@@ -383,6 +401,7 @@ protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).dro
 # state coasts (blackout MAE ≤ 0.10; the bound's is given beside it).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
 from drfkit import claims
 
 for protocol, (_, mech, dark) in pieces.items():
