@@ -229,7 +229,9 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
+    from drfkit.io import CorruptArtefactError, LockedError
     from drfkit.params import ParameterError, load_profile, notebook_params, parse_overrides, validate
+    from drfkit.train import ResumeMismatchError
     from drfkit.runtime import setup
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
@@ -259,8 +261,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2
     setup(args.threads or P.threads, P.seeds[0], P.device)
-    results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None,
-                           protocol=args.protocol)
+    try:
+        results = train_models(P, args.study, progress=True, kinds=args.models or None, seeds=args.seeds or None,
+                               protocol=args.protocol)
+    except (LockedError, CorruptArtefactError, ResumeMismatchError) as exc:  # said in one line, with the fix
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     for (kind, seed), res in results.items():
         print(f"{args.study} {kind} seed {seed}: {res.best_path}")
     return 0

@@ -166,3 +166,21 @@ def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path
         validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path)
     assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).ped_source == "nuscenes"
+
+
+def test_keep_outputs_copies_outputs_only_of_unchanged_code_cells(tmp_path):
+    import nbformat
+
+    sys.path.insert(0, str(REPO_ROOT / "tools"))
+    import build_notebooks
+
+    text = "# %% [markdown]\n# Why\n\n# %%\nx = 1\nx\n\n# %%\ny = 2\n"
+    old = build_notebooks.parse(text, "00_data_prep")
+    old.cells[1].outputs = [nbformat.v4.new_output("execute_result", {"text/plain": "1"}, execution_count=1)]
+    target = tmp_path / "nb.ipynb"
+    nbformat.write(old, target)
+    edited = build_notebooks.parse(text.replace("# Why", "# Why, said better"), "00_data_prep")
+    assert build_notebooks.keep_outputs(edited, target) == 0
+    assert edited.cells[1].outputs[0]["data"]["text/plain"] == "1"
+    changed = build_notebooks.parse(text.replace("x = 1", "x = 3"), "00_data_prep")
+    assert build_notebooks.keep_outputs(changed, target) == 1 and changed.cells[1].outputs == []

@@ -85,3 +85,24 @@ def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatc
     first = studies.target_statistics(P)
     assert studies.target_statistics(P) == first and reads == ["train"]
     assert first["target_scale"] > 0
+
+
+def test_cli_trains_the_book_protocol_under_its_own_names_and_reports_a_held_lock(tiny_profile, tmp_path, capsys):
+    from drfkit.io import exclusive_lock
+
+    args = ["--profile", str(tiny_profile), "--study", "pendulum", "--models", "drf", "--seeds", "0", "--threads", "1"]
+    assert studies.main(args + ["--protocol", "book"]) == 0
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
+    book, paper = studies.checkpoint_stem(P, "pendulum", "drf", 0, "book"), studies.checkpoint_stem(P, "pendulum", "drf", 0)
+    assert book.with_name(book.name + "-best.pt").exists() and not paper.with_name(paper.name + "-best.pt").exists()
+    with exclusive_lock(paper.parent / f".{paper.name}.lock", "test"):
+        import drfkit.train as train_module
+
+        saved, train_module.LOCK_WAIT_S = train_module.LOCK_WAIT_S, 0.0
+        try:
+            assert studies.main(args) == 3
+        finally:
+            train_module.LOCK_WAIT_S = saved
+    err = capsys.readouterr().err
+    assert "is being written by process" in err and "Traceback" not in err
+    assert not paper.with_name(paper.name + "-last.pt").exists()

@@ -75,17 +75,47 @@ def execute(path: Path, timeout: int = 1800) -> None:
     nbformat.write(nb, path)
 
 
+def keep_outputs(new: nbformat.NotebookNode, target: Path) -> int:
+    """Copy the stored outputs of ``target`` into ``new`` for every code cell whose source did not
+    change (matched by position and source); returns how many code cells had to lose theirs.
+    For edits of markdown cells, which need no re-execution."""
+    if not target.exists():
+        return sum(c.cell_type == "code" for c in new.cells)
+    old = nbformat.read(target, as_version=4)
+    old_code = {(i, c.source): c for i, c in enumerate(old.cells) if c.cell_type == "code"}
+    missing = 0
+    for i, cell in enumerate(new.cells):
+        if cell.cell_type != "code":
+            continue
+        match = old_code.get((i, cell.source))
+        if match is None:
+            missing += 1
+        else:
+            cell.outputs, cell.execution_count = match.outputs, match.execution_count
+    return missing
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("names", nargs="*", help="source stems to build (default: all)")
     ap.add_argument("--execute", action="store_true", help="run and store outputs")
+    ap.add_argument("--keep-outputs", action="store_true",
+                    help="keep the stored outputs of code cells whose source is unchanged (after markdown edits); "
+                         "fails if a code cell changed, which needs --execute")
     args = ap.parse_args()
     sources = sorted(SRC.glob("*.py"))
     if args.names:
         sources = [s for s in sources if any(s.stem.startswith(n) for n in args.names)]
     for src in sources:
         target = OUT / f"{src.stem}.ipynb"
-        nbformat.write(parse(src.read_text(), src.stem), target)
+        nb = parse(src.read_text(), src.stem)
+        if args.keep_outputs and not args.execute:
+            changed = keep_outputs(nb, target)
+            if changed:
+                print(f"{target.relative_to(ROOT)}: {changed} code cell(s) changed; rebuild it with --execute",
+                      file=sys.stderr)
+                return 1
+        nbformat.write(nb, target)
         print(f"built {target.relative_to(ROOT)}", flush=True)
         if args.execute:
             execute(target)

@@ -362,15 +362,16 @@ ablation.summarise_ablation(table)
 assert set(table["variant"]) == set(P.ablation_variants) and table["mae_0.5"].gt(0).all()
 
 # %% [markdown]
-# What the paper profile's ablation shows (two seeds for the key variants): **blackout training is
-# the lever that makes a DRF coast**. No architecture change does without it -- the memory-free
-# basis transition with unobserved dims and log r alone learns an r that *falls* with the noise, and a
-# gain that does not drop on pure noise. With blackouts, the DRF's blackout error is several times
-# lower than that of the LSTM and no_dynamics trained the same way, and its gain falls on pure noise.
-# The mechanism is still only part-way there at this budget: r's rank correlation with the noise is
-# far below 0.8 and F does not yet predict the next clean observation better than "no change". The
-# book's protocol (`drfkit.protocols.PROTOCOLS['book']`) is the `book` variant; its paper-scale
-# confirmation is the table below once its runs are trained.
+# What the paper profile's ablation shows (two seeds for the key variants): without training
+# blackouts no variant coasts -- the architecture changes alone learn an r that *falls* with the noise
+# and a gain that does not drop on pure noise. Blackouts alone make the paper's DRF coast, but not
+# through its filter: its gain stays near the clean-frame gain and its F stays unstable, so the memory
+# sits in the transition LSTM. With blackouts *and* a memory-free transition (the `book` variant) the
+# DRF coasts through the filter: the gain halves on pure noise, r rises with the noise, and its
+# blackout error is several times below the LSTM's and no_dynamics' trained the same way. Still short
+# of a full filter at this budget: r follows the noise only loosely and F does not beat "no change" on
+# clean frames. The book's protocol (`drfkit.protocols.PROTOCOLS['book']`) is the `book` variant; its
+# paper-scale confirmation is the table below once its runs are trained.
 
 # %% [markdown]
 # ## Both protocols side by side
