@@ -123,7 +123,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", default=None, help="folder (default results/ablation)")
+    parser.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
     args = parser.parse_args(argv)
+    if args.summary:
+        print(summarise_ablation(ablation_table(args.budget, args.out)).to_string(index=False))
+        return 0
     for name in args.variants:
         try:
             variant_spec(name)

@@ -420,9 +420,14 @@ def test_fused_step_keeps_the_committed_paper_drf_predictions():
     from drfkit import load_checkpoint
     from drfkit.data.pendulum import generate_pendulum
 
-    paths = sorted(Path(__file__).resolve().parents[1].glob("results/paper/models/pendulum-drf-seed0-*-best.pt"))
-    assert paths, "the committed paper checkpoint results/paper/models/pendulum-drf-seed0-*-best.pt is missing"
-    model = load_checkpoint(paths[0]).eval()
+    from drfkit import studies
+    from drfkit.params import load_profile, notebook_params, validate
+
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile("paper")))
+    stem = studies.checkpoint_stem(P, "pendulum", "drf", 0)   # the paper protocol's run
+    path = Path(f"{stem}-best.pt")
+    assert path.exists(), f"the committed paper checkpoint {path} is missing"
+    model = load_checkpoint(path).eval()
     images = torch.as_tensor(generate_pendulum(4, 75, 0.75, seed=11)["images"])
     original, fused_steps = filter_module._batched_diagonal, []
 

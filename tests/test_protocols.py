@@ -88,6 +88,7 @@ def test_ablation_row_is_trained_once_and_reused(tmp_path):
     assert set(table["variant"]) == {"book", "no_dynamics_book"} and "mae_per_frame_blackout" not in table
     summary = ablation.summarise_ablation(table)
     assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
+    assert ablation.main(["--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
 
 
 def test_ablation_cli_rejects_unknown_variants(capsys):

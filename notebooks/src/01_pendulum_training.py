@@ -279,9 +279,10 @@ save_table(P.profile, "pendulum_mechanism", mechanism)
 mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"]).round(3).T
 
 # %% [markdown]
-# In the paper profile (the paper's protocol, 3 seeds) the DRF's filter is inert: r barely follows the
-# frame's noise, the gain on pure-noise frames is about what it is on clean frames, and F_t has a
-# spectral radius near 2 and predicts the next observation several times worse than "no change". The
+# In the paper profile (the paper's protocol, 3 seeds) the DRF's filter is inert: r moves with the
+# frame's noise, but far too little to change the gain, which on pure-noise frames is about what it is
+# on clean frames; F_t has a spectral radius above 2 and predicts the next observation worse than "no
+# change". The
 # memory of the paper's DRF sits in the LSTM cells of its transition network, whose hidden state F_t
 # is computed from; nothing in the loss asks F to describe how the state moves.
 
@@ -344,7 +345,9 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 # protocols, so a gain that any sequence model would get shows up in theirs too. Every variant
 # tried stays in the table. Rows are cached under `results/<profile>/ablation/`; the command
 # behind them: `python -m drfkit.ablation --budget <ablation_budget> --out results/<profile>/ablation
-# --variants ... --seeds ...` (one thread per run; two such processes on two cores).
+# --variants ... --seeds ...` (one thread per run; two such processes on two cores). This notebook
+# trains the rows `ablation_variants` × `ablation_seeds` that are missing and shows every finished row
+# of the budget (in the paper profile, the single levers were run at seed 0 by that command).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -353,13 +356,13 @@ from drfkit.paths import results_dir
 
 rows = [ablation.run_variant(v, s, P.ablation_budget, results_dir(P.profile, "ablation"), progress=False)
         for v in P.ablation_variants for s in P.ablation_seeds]
-table = ablation.ablation_table(P.ablation_budget, results_dir(P.profile, "ablation"))
-table = table[table["variant"].isin(P.ablation_variants)]
+table = ablation.ablation_table(P.ablation_budget, results_dir(P.profile, "ablation"))  # every finished row
 save_table(P.profile, "pendulum_ablation", table)
 ablation.summarise_ablation(table)
 
 # %%
-assert set(table["variant"]) == set(P.ablation_variants) and table["mae_0.5"].gt(0).all()
+required = {(v, s) for v in P.ablation_variants for s in P.ablation_seeds}
+assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"].gt(0).all()
 
 # %% [markdown]
 # What the paper profile's ablation shows (two seeds for the key variants): without training
