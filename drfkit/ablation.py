@@ -27,10 +27,12 @@ import torch
 
 from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout, with_random_blackouts
 from drfkit.diagnostics import blackout_summary, diagnose
+from drfkit.dynamics import BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
 from drfkit.io import atomic_write_json, param_hash
 from drfkit.paths import results_root
 from drfkit.protocols import ABLATION_BUDGETS as BUDGETS
 from drfkit.protocols import VARIANTS, variant_spec
+from drfkit.studies import TRAINING_BLACKOUT_SEED_OFFSET
 from drfkit.train import SequenceData, TrainConfig, load_checkpoint, train_model
 
 DATA_SEED = 1000  # the profiles' pend_data_seed: train = seed, val = seed + 1 (test, seed + 2, is never read)
@@ -66,7 +68,7 @@ def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Pat
     train = _split(cache, budget, "train", spec["train_max_noise"])
     if spec["blackouts"]:
         train = with_random_blackouts(train, spec["blackouts"]["fraction"], tuple(spec["blackouts"]["lengths"]),
-                                      seed=DATA_SEED + 7)
+                                      seed=DATA_SEED + TRAINING_BLACKOUT_SEED_OFFSET)
     val = _split(cache, budget, "val", spec["train_max_noise"])
     config = {"kind": spec["kind"], "input_kind": "pendulum", "out_dim": 2, **spec["model"]}
     cfg = TrainConfig(epochs=budget["epochs"], lr=budget["lr"], batch_size=budget["batch_size"], seed=seed)
@@ -85,7 +87,7 @@ def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Pat
         if level == 0.75:
             row.update(summary)
     frames = blackout_frames(budget["seq_len"])
-    dark = with_blackout(_split(cache, budget, "val", 0.5), *frames, seed=DATA_SEED + 11)
+    dark = with_blackout(_split(cache, budget, "val", 0.5), *frames, seed=DATA_SEED + BLACKOUT_SEED_OFFSET)
     summary, per_frame = diagnose(model, dark)
     row.update(blackout_summary(per_frame, frames))
     for field in ("gain_clean", "gain_pure", "gain_ratio"):

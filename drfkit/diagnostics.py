@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from drfkit.gating import rank_correlation
+from drfkit.models.parts import mean_and_log_variance
 
 CLEAN_LEVEL = 0.0      # a frame with noise level <= this is clean
 NOISY_LEVEL = 0.4      # a frame with noise level > this is noisy
@@ -57,7 +58,7 @@ def filter_trace(model, inputs: torch.Tensor, batch_size: int = 100) -> dict[str
                 out["static_err"] = (z[:, :-1] - w[:, 1:])[..., :k].norm(dim=-1)
                 sample = F.flatten(0, 1)[::SPECTRAL_SUBSAMPLE].double()
                 out["spectral_radius"] = torch.linalg.eigvals(sample).abs().amax(-1) if len(sample) else sample.new_empty(0)
-                h = torch.cat([z, torch.log(tr["p_diag"])], dim=-1)
+                h = mean_and_log_variance(z, tr["p_diag"])   # what features() hands the decoder
             else:
                 h, _ = model.features(x)
             out["mean"] = model.head(h)[0]

@@ -37,6 +37,7 @@ def blackout_split(P, split: str) -> dict[str, np.ndarray]:
 
 
 def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """MC-dropout mean and total sigma of ``model`` on arrays['images'] (any model input), seeded."""
     torch.manual_seed(seed)
     pred = predict(model, arrays["images"], n_samples=P.n_samples, batch_size=256)
     return pred.mean.numpy(), pred.total.numpy()
@@ -160,9 +161,8 @@ def pedestrian_blackout(P, split: str) -> tuple[dict[str, np.ndarray], np.ndarra
 
 
 def _depth_predictions(P, model, inputs: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    torch.manual_seed(seed)
-    pred = predict(model, inputs, n_samples=P.n_samples, batch_size=256)
-    return pred.mean.numpy()[..., 0], pred.total.numpy()[..., 0]
+    mean, total = _mc_mean(P, model, {"images": inputs}, seed)
+    return mean[..., 0], total[..., 0]
 
 
 def _seconds(seqs: dict[str, np.ndarray]) -> np.ndarray:

@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from drfkit.io import param_hash
+from drfkit.io import atomic_write_bytes, param_hash
 from drfkit.manifest import now_iso, read_manifest, record_notebook, update_manifest
 from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
 from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
@@ -62,8 +62,6 @@ def restore_outputs(root: Path, snapshot: dict[Path, bytes]) -> list[Path]:
         changed.append(path)
     for path, data in snapshot.items():
         if not path.exists() or path.read_bytes() != data:
-            from drfkit.io import atomic_write_bytes
-
             atomic_write_bytes(path, data)
             changed.append(path)
     return changed
