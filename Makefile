@@ -1,6 +1,8 @@
 # The study book's commands. Only python3 (3.11) is needed; everything else is
 # installed into .venv from environment.txt the first time.
 PROFILE ?= paper
+# JOBS > 1: train the missing runs first on a Dask LocalCluster of JOBS workers (drfkit.grid)
+JOBS ?= 1
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -11,6 +13,7 @@ NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbva
 
 help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
+	@echo "               [JOBS=N]               train the missing runs first on N Dask workers"
 	@echo "make quick                            the fast profile (< 10 min on 2 CPU cores)"
 	@echo "make test                             unit tests + strict nbval on notebooks/"
 	@echo "make bench                            the timing benchmark alone, prints the table"
@@ -24,7 +27,7 @@ $(STAMP): environment.txt pyproject.toml
 	@touch $@
 
 reproduce: $(STAMP)
-	$(PY) -m drfkit.pipeline --profile $(PROFILE)
+	$(PY) -m drfkit.pipeline --profile $(PROFILE) --jobs $(JOBS)
 
 # the pipeline directly, not a second make: a SIGTERM to this make then reaches it (it dies with its parent)
 quick: $(STAMP)

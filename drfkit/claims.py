@@ -258,13 +258,19 @@ def f2_blackout_coasting(blackout: pd.DataFrame, bound_mae: float, target: float
 
 
 # ----------------------------------------------------------------------------- table
+def read_claims(path) -> pd.DataFrame:
+    """A claims.csv with its protocol column (tables written before protocols existed judged the paper's)."""
+    table = pd.read_csv(path)
+    if "protocol" not in table:
+        table.insert(1, "protocol", "paper")
+    return table
+
+
 def upsert(profile: str, rows: list[dict[str, Any]], protocol: str = "paper") -> pd.DataFrame:
     """Replace rows with the same (id, protocol) in ``results/<profile>/claims.csv``; rewrite claims.md.
     ``protocol``: the training protocol of the models the rows judge (``drfkit.protocols``)."""
     path = results_dir(profile) / "claims.csv"
-    table = pd.read_csv(path) if path.exists() else pd.DataFrame(columns=COLUMNS)
-    if "protocol" not in table:  # tables written before protocols existed judged the paper's
-        table.insert(1, "protocol", "paper")
+    table = read_claims(path) if path.exists() else pd.DataFrame(columns=COLUMNS)
     new = pd.DataFrame([{**row, "protocol": protocol} for row in rows], columns=COLUMNS)
     replaced = table.set_index(["id", "protocol"]).index.isin(new.set_index(["id", "protocol"]).index)
     table = pd.concat([table[~replaced], new], ignore_index=True)

@@ -24,7 +24,8 @@ import torch
 from drfkit import oracle, studies
 from drfkit.data.pendulum import blackout_frames, with_blackout
 from drfkit.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
-from drfkit.uncertainty import predict
+from drfkit.paths import predictions_dir
+from drfkit.predictions import cached_predict_rates
 
 BLACKOUT_SEED_OFFSET = 11  # the blackout's pixel noise: split seed + this
 
@@ -38,15 +39,15 @@ def blackout_split(P, split: str) -> dict[str, np.ndarray]:
 
 def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """MC-dropout mean and total sigma of ``model`` on arrays['images'] (any model input), seeded."""
-    torch.manual_seed(seed)
-    pred = predict(model, arrays["images"], n_samples=P.n_samples, batch_size=256)
+    pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.n_samples,
+                                dropout_rates=[None], seed=seed, batch_size=256)[0]
     return pred.mean.numpy(), pred.total.numpy()
 
 
-def mechanism_table(P, models: dict[tuple[str, int], Any], level: float) -> pd.DataFrame:
-    """One row per (model, seed): diagnostics on the test split at max noise ``level`` and the
-    gains on the blackout test set's clean and pure-noise frames."""
-    test, dark = studies.pendulum_split(P, "test", level), blackout_split(P, "test")
+def mechanism_table(P, models: dict[tuple[str, int], Any], level: float, split: str = "test") -> pd.DataFrame:
+    """One row per (model, seed): diagnostics on ``split`` at max noise ``level`` and the
+    gains on the blackout version of ``split``'s clean and pure-noise frames."""
+    test, dark = studies.pendulum_split(P, split, level), blackout_split(P, split)
     rows = []
     for (kind, seed), model in models.items():
         row = {"model": kind, "seed": seed, "noise": float(level),
@@ -58,9 +59,9 @@ def mechanism_table(P, models: dict[tuple[str, int], Any], level: float) -> pd.D
     return pd.DataFrame(rows)
 
 
-def blackout_curves(P, models: dict[tuple[str, int], Any]) -> pd.DataFrame:
-    """MAE per frame of every (model, seed) on the blackout test set: columns model, seed, frame, mae."""
-    dark = blackout_split(P, "test")
+def blackout_curves(P, models: dict[tuple[str, int], Any], split: str = "test") -> pd.DataFrame:
+    """MAE per frame of every (model, seed) on the blackout set of ``split``: columns model, seed, frame, mae."""
+    dark = blackout_split(P, split)
     rows = []
     for (kind, seed), model in models.items():
         mean, _ = _mc_mean(P, model, dark, seed)
@@ -212,3 +213,62 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
             rows.append({"model": kind, "seed": seed, "noise": "blackout",
                          "mae": _masked_mae(mean, dark["targets"][..., 0], removed)})
     return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------------ command line
+def probe(P, models: dict[tuple[str, int], Any], level: float, split: str = "val") -> pd.DataFrame:
+    """The mechanism checks and the blackout MAE of ``models`` on ``split`` (validation by
+    default: a run can be judged while it trains without touching the test set)."""
+    mech = mechanism_table(P, models, level, split)
+    dark = blackout_table(blackout_curves(P, models, split))
+    return dark.merge(mech, on=["model", "seed"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit.dynamics --profile paper --protocol book --models drf --seeds 0 [--last]``
+
+    Prints the mechanism checks (rank correlation of r with the frame's noise, gains on clean and
+    pure-noise frames, prediction ratio) and the blackout MAE of trained pendulum runs on the
+    validation split, from their selected checkpoints or (``--last``) the last epoch of a run
+    still training.
+    """
+    import argparse
+
+    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.protocols import PROTOCOLS
+    from drfkit.runtime import setup
+    from drfkit.train import load_checkpoint, load_latest
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="paper")
+    parser.add_argument("--protocol", default="paper", choices=sorted(PROTOCOLS))
+    parser.add_argument("--models", nargs="*", default=["drf"])
+    parser.add_argument("--seeds", nargs="*", type=int, default=[0])
+    parser.add_argument("--level", type=float, default=0.75, help="max noise of the mechanism checks")
+    parser.add_argument("--split", default="val", choices=["val", "test"])
+    parser.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args(argv)
+    try:
+        P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(args.profile)))
+    except ParameterError as exc:
+        print(f"parameter error: {exc}")
+        return 2
+    setup(args.threads, P.seeds[0], "cpu")
+    models = {}
+    for kind in args.models:
+        for seed in args.seeds:
+            stem = studies.checkpoint_stem(P, "pendulum", kind, seed, args.protocol)
+            if not (stem.parent / f"{stem.name}-best.pt").exists():
+                print(f"error: no checkpoint {stem}-best.pt; train it with python -m drfkit.studies --profile "
+                      f"{args.profile} --study pendulum --protocol {args.protocol} --models {kind} --seeds {seed}")
+                return 3
+            models[(kind, seed)] = load_latest(stem) if args.last else load_checkpoint(f"{stem}-best.pt")
+            print(f"{kind} seed {seed}: epoch {models[(kind, seed)].checkpoint_meta.get('epoch')}")
+    with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
+        print(probe(P, models, args.level, args.split).to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -15,6 +15,8 @@ import pandas as pd
 import torch
 
 from drfkit import metrics
+from drfkit.paths import predictions_dir
+from drfkit.predictions import cached_predict_rates
 from drfkit.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
@@ -65,13 +67,21 @@ def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: floa
 
 
 def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_rates, level: float = 0.95,
-                         batch_size: int = 256, device=None) -> list[dict[str, float]]:
-    """``evaluate_model`` at several dropout rates; the encoder and filter run once."""
+                         batch_size: int = 256, device=None, seed: int | None = None, cache=None
+                         ) -> list[dict[str, float]]:
+    """``evaluate_model`` at several dropout rates; the encoder and filter run once. With a
+    ``seed`` the dropout masks are seeded here and the prediction may come from ``cache``
+    (``drfkit.predictions``); without one the caller's random state is used."""
     from drfkit.uncertainty import predict_rates
 
+    if seed is None:
+        preds = predict_rates(model, data.inputs, n_samples=n_samples, dropout_rates=dropout_rates,
+                              batch_size=batch_size, device=device)
+    else:
+        preds = cached_predict_rates(model, data.inputs, cache=cache, n_samples=n_samples,
+                                     dropout_rates=dropout_rates, seed=seed, batch_size=batch_size, device=device)
     out = []
-    for pred in predict_rates(model, data.inputs, n_samples=n_samples, dropout_rates=dropout_rates,
-                              batch_size=batch_size, device=device):
+    for pred in preds:
         m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
         m["aleatoric"] = float(pred.aleatoric.mean())
         m["epistemic"] = float(pred.epistemic.mean())
@@ -134,10 +144,10 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     rows = []
     for noise in noise_levels:
         data = studies.study_data(P, study, "test", noise)
-        for (kind, seed), model in models.items():
-            torch.manual_seed(seed)  # the dropout masks of MC sampling are part of the seed
+        for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
             results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
-                                           level=P.interval_level, device=device)
+                                           level=P.interval_level, device=device, seed=seed,
+                                           cache=predictions_dir(P.profile))
             for p, m in zip(dropout_rates, results):
                 rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
                              "dropout_p": model.default_dropout_p if p is None else float(p), **m})
@@ -150,7 +160,6 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
     Returns columns study, model, noise, expected, observed (mean over seeds), observed_sd.
     """
     from drfkit import studies
-    from drfkit.uncertainty import predict
 
     models = models if models is not None else studies.trained_models(P, study)
     device = studies.pick_device(P.device)
@@ -161,8 +170,8 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
         if data.mask is not None:
             mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
         for (kind, seed), model in models.items():
-            torch.manual_seed(seed)
-            pred = predict(model, data.inputs, n_samples=P.n_samples, device=device)
+            pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.n_samples,
+                                        dropout_rates=[None], seed=seed, device=device)[0]
             expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
             rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,
                       "observed": o} for e, o in zip(expected, observed)]

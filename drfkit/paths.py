@@ -32,6 +32,11 @@ def models_dir(profile: str) -> Path:
     return results_dir(profile, "models")
 
 
+def predictions_dir(profile: str) -> Path:
+    """The MC-dropout prediction cache (``drfkit.predictions``); not committed."""
+    return results_dir(profile, "predictions")
+
+
 def tables_dir(profile: str) -> Path:
     return results_dir(profile, "tables")
 

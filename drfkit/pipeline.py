@@ -10,6 +10,10 @@ output file it changed is put back as it was before it started (checkpoints and 
 excepted: they are written atomically and resume), its kernel and children are stopped, and the
 manifest says ``interrupted in <notebook>`` or ``failed in <notebook>``. Rerunning the same
 command after that skips the notebooks that finished with the same parameters and code.
+
+``--jobs N`` (N > 1, ``make reproduce JOBS=N``) or ``--scheduler ADDRESS`` first trains the missing
+runs of the training notebooks it will execute on Dask (``drfkit.grid``); the notebooks then only
+evaluate. The default trains inside the notebooks, one run after another.
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
 # What a notebook run may leave half-rewritten: everything under results/<profile>/ except the
 # checkpoints (written atomically per epoch and resumable), the data caches (hashed by their
 # parameters) and the manifest (which records the interruption itself).
-UNSNAPSHOTTED = ("models", "data", "ablation", "manifest.json")
+UNSNAPSHOTTED = ("models", "data", "ablation", "predictions", "manifest.json")
 
 
 def notebook_path(name: str) -> Path:
@@ -206,10 +210,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="*", help="run only these notebooks (names without .ipynb)")
     parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
                         help="override profile parameters (YAML values); recorded in the manifest")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="N > 1: first train the training notebooks' missing runs on a Dask LocalCluster "
+                             "of N workers (drfkit.grid), then run the notebooks; 1 (default): sequential")
+    parser.add_argument("--scheduler", help="like --jobs, on this Dask scheduler (tcp://host:8786) or local:N")
     args = parser.parse_args(argv)
     _die_with_parent()
     try:
-        return run(args.profile, args.only, overrides=parse_overrides(args.set))
+        overrides = parse_overrides(args.set)
+        if args.jobs > 1 or args.scheduler:
+            from drfkit import studies
+            from drfkit.grid import pretrain
+
+            if pretrain(studies, args.profile, overrides, args.only, args.scheduler or f"local:{args.jobs}",
+                        out=lambda line: print(line, flush=True)) != 0:
+                print("FAILED: training grid (the runs above); no notebook was run. Rerun the same command "
+                      "to train what is missing", file=sys.stderr)
+                return 1
+        return run(args.profile, args.only, overrides=overrides)
     except ParameterError as exc:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2

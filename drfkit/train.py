@@ -92,11 +92,12 @@ class TrainConfig:
     lr: float
     batch_size: int
     seed: int
-    grad_clip: float = 10.0
+    grad_clip: float | None = 10.0  # max gradient norm; None = no clipping (Monoloco as published)
     lr_step: int | None = None  # StepLR step (epochs); None = constant lr
     lr_gamma: float = 1.0
     framewise: bool = False  # train on single frames (Monoloco)
     patience: int = 0  # stop after this many epochs without a better validation loss; 0 = never
+    select_on: str = "loss"  # the epoch kept as -best.pt: lowest validation loss, or "l1" of the mean
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
@@ -106,6 +107,20 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.patience must be an integer >= 0 (0 = no early stop), got {self.patience!r}")
         if not (0 < self.lr < 1):
             raise ValueError(f"TrainConfig.lr must be in (0, 1), got {self.lr!r}")
+        if self.select_on not in SELECTION_METRICS:
+            raise ValueError(f"TrainConfig.select_on must be one of {SELECTION_METRICS}, got {self.select_on!r}")
+        if self.grad_clip is not None and not self.grad_clip > 0:
+            raise ValueError(f"TrainConfig.grad_clip must be > 0 or None (no clipping), got {self.grad_clip!r}")
+
+
+SELECTION_METRICS = ("loss", "l1")
+# Fields added after checkpoints were committed: at these values they stay out of names and
+# fingerprints, so every run made before them keeps its files (and resumes).
+LATER_FIELDS = {"select_on": "loss"}
+
+
+def _train_fields(cfg: "TrainConfig") -> dict[str, Any]:
+    return {k: v for k, v in vars(cfg).items() if not (k in LATER_FIELDS and v == LATER_FIELDS[k])}
 
 
 @dataclass
@@ -146,6 +161,23 @@ def evaluate_loss(model, data: SequenceData, batch_size: int, device: torch.devi
     return total / max(weight, 1)
 
 
+@torch.no_grad()
+def evaluate_l1(model, data: SequenceData, batch_size: int, device: torch.device) -> float:
+    """Mean |mean - target| over the valid values of ``data`` in eval mode (dropout off):
+    Monoloco's epoch selection (validation L1 of mu)."""
+    model.eval()
+    total, weight = 0.0, 0
+    for start in range(0, len(data), batch_size):
+        idx = torch.arange(start, min(start + batch_size, len(data)))
+        inputs, targets, mask = data.batch(idx, device)
+        err = (model(inputs)[0] - targets).abs()  # (B, T, out)
+        if mask is not None:
+            err = err[mask]
+        total += float(err.sum())
+        weight += err.numel()
+    return total / max(weight, 1)
+
+
 # When to stop, not what an epoch computes: epoch e is the same whatever these say, so they
 # are left out of the fingerprint (and a finished or early-stopped run can be extended).
 STOPPING_FIELDS = ("epochs", "patience")
@@ -153,14 +185,14 @@ STOPPING_FIELDS = ("epochs", "patience")
 
 def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -> str:
     """What a resume must agree on: everything but ``STOPPING_FIELDS``."""
-    train = {k: v for k, v in vars(train_cfg).items() if k not in STOPPING_FIELDS}
+    train = {k: v for k, v in _train_fields(train_cfg).items() if k not in STOPPING_FIELDS}
     return param_hash({"model": config, "train": train, "data": data_key})
 
 
 def naming_fields(train_cfg: TrainConfig) -> dict[str, Any]:
     """The training fields that name a run's checkpoint files: all but ``patience``, which
     only decides when the run stops (``epochs`` stays, as in names made before patience)."""
-    return {k: v for k, v in vars(train_cfg).items() if k != "patience"}
+    return {k: v for k, v in _train_fields(train_cfg).items() if k != "patience"}
 
 
 def patience_exhausted(epoch: int, best_epoch: int, patience: int) -> bool:
@@ -291,7 +323,8 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
                     f"{idx[:8].tolist()}...); the last good checkpoint {last_path} is kept")
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            grad_norm = torch.nn.utils.clip_grad_norm_(  # an infinite bound only measures the norm
+                model.parameters(), math.inf if cfg.grad_clip is None else cfg.grad_clip)
             if not torch.isfinite(grad_norm):
                 raise NonFiniteLossError(
                     f"non-finite gradient at epoch {epoch + 1}, step {step} (sequences "
@@ -302,11 +335,14 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
         scheduler.step()
         train_loss = total / count
         val_loss = evaluate_loss(model, val, max(cfg.batch_size, 256), device)
-        result.history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
-                               "lr": optimiser.param_groups[0]["lr"], "seconds": time.perf_counter() - t0,
-                               "device": trained_on})
-        if val_loss < result.best_val_loss:
-            result.best_val_loss, result.best_epoch = val_loss, epoch + 1
+        row = {"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss}
+        if cfg.select_on == "l1":
+            row["val_l1"] = evaluate_l1(model, val, max(cfg.batch_size, 256), device)
+        row |= {"lr": optimiser.param_groups[0]["lr"], "seconds": time.perf_counter() - t0, "device": trained_on}
+        result.history.append(row)
+        score = row["val_l1"] if cfg.select_on == "l1" else val_loss  # best_val_loss holds this score
+        if score < result.best_val_loss:
+            result.best_val_loss, result.best_epoch = score, epoch + 1
             best = {"format": CHECKPOINT_FORMAT, "config": model_config,
                     "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
                     "meta": {"epoch": epoch + 1, "val_loss": val_loss, "seed": cfg.seed, "fingerprint": fp,
@@ -362,8 +398,8 @@ def load_latest(checkpoint_stem: str | Path, device: torch.device | str = "cpu")
 
 def selection_audit(curves, patience: int):
     """Per (model, seed) of a training-curves frame (``history_frame`` rows with ``model`` and
-    ``seed`` columns): epochs trained, the best epoch and validation loss, the final validation
-    loss, and the longest wait between two successive improvements. If that wait is shorter than
+    ``seed`` columns): epochs trained, the best epoch and validation score (the loss, or the L1
+    of runs selected on it), the final one, and the longest wait between two successive improvements. If that wait is shorter than
     ``patience`` in every run, the early stop never ended a run that would still improve within
     what was observed.
     """
@@ -371,7 +407,8 @@ def selection_audit(curves, patience: int):
 
     rows = []
     for (kind, seed), run in curves.groupby(["model", "seed"], sort=False):
-        val = run.sort_values("epoch")["val_loss"].to_numpy()
+        metric = "val_l1" if "val_l1" in run and run["val_l1"].notna().all() else "val_loss"  # what selected
+        val = run.sort_values("epoch")[metric].to_numpy()
         best, last_improvement, longest_wait = math.inf, 0, 0
         for epoch, v in enumerate(val, 1):
             if v < best:
@@ -380,7 +417,7 @@ def selection_audit(curves, patience: int):
         per_device = [(d, len(g), g.median()) for d, g in run["seconds"].groupby(devices, sort=True)]
         rows.append({"model": kind, "seed": seed, "epochs": len(val), "best_epoch": last_improvement,
                      "best_val_loss": best, "final_val_loss": float(val[-1]), "longest_wait": longest_wait,
-                     "patience": patience, "epoch_s_by_device": "; ".join(
+                     "selected_on": metric, "patience": patience, "epoch_s_by_device": "; ".join(
                          f"{device}: {n} epochs, median {sec:.3g} s" for device, n, sec in per_device)})
     return pd.DataFrame(rows)
 
@@ -398,4 +435,4 @@ def count_parameters(model) -> int:
 
 
 __all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "ResumeMismatchError", "train_model", "run_finished", "naming_fields",
-           "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "history_frame", "count_parameters"]
+           "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "evaluate_l1", "history_frame", "count_parameters"]

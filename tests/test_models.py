@@ -9,7 +9,7 @@ import torch
 
 from drfkit.models import (Decoder, DeepRecursiveFilter, Monoloco, build_model, centre_keypoints,
                            default_config, gaussian_nll, relative_laplace_loss)
-from drfkit.models.parts import SIGMA_FLOOR, VARIANCE_FLOOR
+from drfkit.models.parts import SIGMA_FLOOR, VARIANCE_FLOOR, keypoint_box_centre
 
 torch.set_num_threads(1)
 
@@ -211,17 +211,63 @@ def test_monoloco_loss_matches_formula_and_gradients():
         assert torch.allclose(a, b, rtol=1e-8)
 
 
-def test_centre_keypoints_uses_box_of_detected_keypoints():
+def test_family_encoder_centres_on_the_box_of_detected_keypoints():
     kp = torch.zeros(1, 2, 17, 3)
     kp[0, 0, 0] = torch.tensor([1.0, 2.0, 0.9])
     kp[0, 0, 1] = torch.tensor([3.0, 6.0, 0.5])
-    kp[0, 0, 2] = torch.tensor([100.0, 100.0, 0.0])  # undetected: ignored and zeroed
-    out = centre_keypoints(kp)  # frame 1 has no keypoint at all
-    assert out.shape == (1, 2, 34)
-    centre = torch.tensor([2.0, 4.0])
-    assert torch.allclose(out[0, 0, 0:2], torch.tensor([1.0, 2.0]) - centre)
-    assert torch.allclose(out[0, 0, 2:4], torch.tensor([3.0, 6.0]) - centre)
-    assert (out[0, 0, 4:] == 0).all() and (out[0, 1] == 0).all()
+    kp[0, 0, 2:] = torch.tensor([100.0, 100.0, 0.0])  # undetected: ignored and zeroed
+    centre, out = keypoint_box_centre(kp)  # frame 1 has no keypoint at all
+    assert out.shape == (1, 2, 17, 2)
+    assert torch.allclose(centre[0, 0, 0], torch.tensor([2.0, 4.0]))
+    assert torch.allclose(out[0, 0, 0], torch.tensor([-1.0, -2.0]))
+    assert torch.allclose(out[0, 0, 1], torch.tensor([1.0, 2.0]))
+    assert (out[0, 0, 2:] == 0).all() and (out[0, 1] == 0).all() and (centre[0, 1] == 0).all()
+
+
+def test_monoloco_centres_on_the_box_of_all_17_placeholders_included():
+    # as the published code: the box around every keypoint, a missed one's placeholder too
+    kp = torch.zeros(1, 1, 17, 3)
+    kp[0, 0, 0] = torch.tensor([1.0, 2.0, 0.9])
+    kp[0, 0, 1] = torch.tensor([3.0, 6.0, 0.5])
+    kp[0, 0, 2:] = torch.tensor([-5.0, -4.0, 0.0])  # 15 missed keypoints at their placeholder
+    out = centre_keypoints(kp).view(17, 2)
+    centre = torch.tensor([(-5.0 + 3.0) / 2, (-4.0 + 6.0) / 2])
+    assert torch.allclose(out[0], torch.tensor([1.0, 2.0]) - centre)
+    assert torch.allclose(out[1], torch.tensor([3.0, 6.0]) - centre)
+    assert torch.allclose(out[2:], torch.tensor([-5.0, -4.0]) - centre)
+    # every keypoint seen: the same numbers as the family's centring
+    kp[0, 0, 2:, 2] = 0.3
+    assert torch.allclose(centre_keypoints(kp), keypoint_box_centre(kp)[1].flatten(-2))
+
+
+def test_monoloco_mc_dropout_switches_on_only_the_first_dropout():
+    model = make("monoloco", "keypoints").eval()
+    x = inputs_for("keypoints", b=2, t=3)
+    h, _ = model.features(x)
+    S, p = 300, model.dropout_p
+    torch.manual_seed(5)
+    mean, _ = model.head(h, n_samples=S)  # (S, 2, 3, 1)
+    # by hand: the input layer in eval mode, one dropout mask per sample on its output, then the
+    # residual blocks and the output layer in eval mode (no dropout)
+    torch.manual_seed(5)
+    first = torch.relu(model.input_norm(model.input_layer(h.reshape(6, 34))))
+    masks = torch.empty(S, 6, first.shape[-1]).bernoulli_(1 - p) / (1 - p)
+    mus = []
+    for m in masks:
+        y = first * m
+        for i in range(0, len(model.layers), 2):
+            z = torch.relu(model.norms[i](model.layers[i](y)))
+            y = y + torch.relu(model.norms[i + 1](model.layers[i + 1](z)))
+        mus.append(model.output_layer(y)[:, 0])
+    hand = torch.stack(mus).view(S, 2, 3, 1)
+    assert torch.allclose(mean, hand, atol=1e-5)
+    hand_spread = hand.std(0)
+    assert torch.allclose(mean.std(0), hand_spread, rtol=1e-4)
+    # all seven dropouts on (the book's old choice) spreads mu more
+    torch.manual_seed(5)
+    flat = h.reshape(6, 34).unsqueeze(0).expand(S, -1, -1).reshape(S * 6, 34)
+    all_mu, _ = model.mlp(flat, p, dropout_on=True, bn_batch_stats=False)
+    assert all_mu.view(S, 6).std(0).mean() > 1.05 * hand_spread.mean()
 
 
 def test_monoloco_sampling_keeps_batchnorm_in_eval_and_modes_agree():
@@ -329,10 +375,7 @@ def test_build_model_round_trip(kind, input_kind):
 def test_config_contents_and_defaults():
     cfg = default_config("drf", "pendulum", 2)
     assert cfg["kind"] == "drf" and cfg["latent"] == 30 and cfg["input_kind"] == "pendulum"
-    assert make("drf", "pendulum").training_defaults["lr"] == 1e-4
     mono = make("monoloco", "keypoints")
-    assert mono.training_defaults == {"lr": 2e-3, "epochs": 150, "batch_size": 256,
-                                      "lr_step": 20, "lr_gamma": 0.9, "grad_clip": None}
     assert mono.default_dropout_p == 0.2 and make("lstm", "keypoints").default_dropout_p == 0.1
     stride = make("no_dynamics", "pendulum", image_downsample="stride")
     assert stride(inputs_for("pendulum"))[0].shape == (3, 6, 2)

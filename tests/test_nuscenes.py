@@ -29,12 +29,16 @@ import pytest
 
 from drfkit.data import nuscenes
 from drfkit.data.nuscenes import (
+    box_in_image_any,
     box_iou,
     camera_images,
+    enlarge_boxes,
     load_nuscenes_records,
     match_boxes,
+    prediction_file_candidates,
     project_annotations,
     quaternion_to_rotation,
+    read_predictions,
     read_tables,
     write_noisy_images,
 )
@@ -193,6 +197,14 @@ def _nusc_detection(box, conf=0.6):
     return {"keypoints": kp.ravel().tolist(), "bbox": [float(v) for v in box], "score": 0.7}
 
 
+PREDICTION_NAME_STYLES = {  # image samples/CAM_FRONT/X.jpg -> prediction file name
+    "predictions": lambda base, stem: f"{base}.predictions.json",  # openpifpaf >= 0.11 on the jpg
+    "png": lambda base, stem: f"{stem}.png.json",
+    "pifpaf": lambda base, stem: f"{base}.pifpaf.json",  # openpifpaf <= 0.10 on the jpg
+    "png.pifpaf": lambda base, stem: f"{stem}.png.pifpaf.json",  # openpifpaf <= 0.10 on the noisy png
+}
+
+
 def _nusc_write_predictions(pred_dir: Path, facts: dict, name_style: str = "predictions") -> None:
     pred_dir.mkdir(parents=True, exist_ok=True)
     for scene, k, filename, k_matrix in facts["images"]:
@@ -206,8 +218,7 @@ def _nusc_write_predictions(pred_dir: Path, facts: dict, name_style: str = "pred
             shifted = box + np.array([0.08 * box[2], -0.05 * box[3], 0.0, 0.0])  # IoU ~ 0.8
             dets.append(_nusc_detection(shifted))
         dets.append(_nusc_detection([1450.0, 30.0, 60.0, 150.0]))  # far from everyone
-        base = Path(filename).name
-        out = f"{base}.predictions.json" if name_style == "predictions" else f"{Path(filename).stem}.png.json"
+        out = PREDICTION_NAME_STYLES[name_style](Path(filename).name, Path(filename).stem)
         (pred_dir / out).write_text(json.dumps(dets))
 
 
@@ -370,6 +381,212 @@ def test_both_sources_give_identical_record_structures(fixture, tmp_path):
         assert real[name].shape[1:] == sim[name].shape[1:], name
     check_records(real)
     check_records(sim)
+
+
+# ---------------------------------------------------------------- the devkit's keep rule
+
+
+def _cube(z_near: float, z_far: float, x=(-0.3, 0.3), y=(-0.9, 0.9)) -> np.ndarray:
+    """8 corners (8,3) of a camera-aligned box spanning x, y and [z_near, z_far]."""
+    return np.array([(xx, yy, zz) for xx in x for yy in y for zz in (z_near, z_far)], float)
+
+
+def test_box_in_image_any_is_the_devkits_rule():
+    k = np.array([[1000.0, 0, 800], [0, 1000.0, 450], [0, 0, 1]])
+
+    def keep(corners):
+        return bool(box_in_image_any(corners, k, 1600, 900))
+
+    assert keep(_cube(9.5, 10.5))
+    assert not keep(_cube(0.7, 0.9, y=(-0.3, 0.3)))  # 0.8 m in front: in the image but no corner beyond 1 m
+    assert not keep(_cube(0.7, 1.2))  # beyond 1 m only outside the image (v = 450 +- 750)
+    assert keep(_cube(0.7, 1.2, y=(-0.3, 0.3)))  # the far corners are visible
+    one_behind = _cube(3.0, 3.5)
+    one_behind[0, 2] = 0.05  # a single corner 0.05 m in front, the others visible
+    assert not keep(one_behind)
+    one_behind[0, 2] = 0.11
+    assert keep(one_behind)
+    # Only one corner projects inside the image (x = -2.3 at z = 3: u = 33), and it is visible.
+    one_visible = np.array([(-4.0, 0.0, 3.0)] * 8)
+    one_visible[3] = (-2.3, 0.0, 3.0)
+    assert keep(one_visible)
+    one_visible[3] = (-0.7, 0.0, 0.9)  # inside the image, but not more than 1 m in front
+    assert not keep(one_visible)
+    on_edge = np.array([(-4.0, 0.0, 3.0)] * 8)
+    on_edge[5] = (-2.0, 0.0, 2.5)  # u = 0 exactly: the devkit wants 0 < u
+    assert not keep(on_edge)
+    batch = np.stack([_cube(9.5, 10.5), _cube(0.7, 0.9)])
+    np.testing.assert_array_equal(box_in_image_any(batch, k, 1600, 900), [True, False])
+    with pytest.raises(ValueError, match=r"\(\.\.\., 8, 3\)"):
+        box_in_image_any(np.zeros((4, 3)), k, 1600, 900)
+
+
+def _add_pedestrian(tables: dict, name: str, cam_xyz, size=PED_SIZE, scene="scene-0001", k=0) -> str:
+    """Add an adult pedestrian at camera position cam_xyz to keyframe k (in memory): its instance token."""
+    instance = _nusc_tok("instance", scene, name)
+    tables["instance"].append({
+        "token": instance, "category_token": _nusc_tok("cat", "human.pedestrian.adult"), "nbr_annotations": 1,
+        "first_annotation_token": _nusc_tok("ann", scene, name, k), "last_annotation_token": _nusc_tok("ann", scene, name, k),
+    })
+    tables["sample_annotation"].append({
+        "token": _nusc_tok("ann", scene, name, k), "sample_token": _nusc_tok("sample", scene, k),
+        "instance_token": instance, "visibility_token": "4", "attribute_tokens": [],
+        "translation": _nusc_cam_to_global(scene, k, cam_xyz), "size": list(size),
+        "rotation": _nusc_ego(scene, k)[1], "prev": "", "next": "", "num_lidar_pts": 5, "num_radar_pts": 0,
+    })
+    return instance
+
+
+def test_project_annotations_keeps_what_the_devkit_keeps(fixture):
+    root, _, _ = fixture
+    tables = read_tables(root, VERSION)
+    # Whole box 0.7-0.9 m in front and inside the image: the devkit drops it (no corner beyond 1 m).
+    near = _add_pedestrian(tables, "near", (0.0, 0.6, 0.8), size=(0.6, 0.2, 1.8))
+    # Near face 0.05 m in front (not beyond 0.1 m), far face 2.05 m and in the image: dropped.
+    straddling = _add_pedestrian(tables, "straddling", (0.0, 0.6, 1.05), size=(0.6, 2.0, 1.8))
+    # Partly left of the image, some corners visible at z ~ 10: kept, box clipped at u = 0.
+    edge = _add_pedestrian(tables, "edge", (-6.5, 0.6, 10.0))
+    gt = project_annotations(tables)
+    tokens = set(gt["instance_token"])
+    assert near not in tokens
+    assert straddling not in tokens
+    assert edge in tokens
+    assert len(gt["position"]) == 8  # the fixture's 7 + the edge pedestrian
+    box = gt["box"][list(gt["instance_token"]).index(edge)]
+    expected = _nusc_expected_box((-6.5, 0.6, 10.0), K_FRONT_A)
+    assert expected[0] < 0 < expected[0] + expected[2]  # really partly outside
+    np.testing.assert_allclose(box, [0.0, expected[1], expected[0] + expected[2], expected[3]], atol=1e-6)
+
+
+def test_dangling_tokens_name_the_table(fixture):
+    root, _, facts = fixture
+    tables = read_tables(root, VERSION)
+
+    def without(table: str, token: str) -> dict:
+        out = {name: list(rows) for name, rows in tables.items()}
+        out[table] = [r for r in out[table] if r["token"] != token]
+        assert len(out[table]) == len(tables[table]) - 1
+        return out
+
+    scene, sample = _nusc_tok("scene", "scene-0002"), _nusc_tok("sample", "scene-0002", 0)
+    with pytest.raises(ValueError, match=rf"sample {sample} refers to scene {scene}, which has no row in scene\.json"):
+        project_annotations(without("scene", scene))
+    with pytest.raises(ValueError, match=rf"refers to sample {sample}, which has no row in sample\.json"):
+        camera_images(without("sample", sample))
+    cs = _nusc_tok("cs", "scene-0001", "CAM_FRONT")
+    with pytest.raises(ValueError, match=rf"sample_data .* refers to calibrated_sensor {cs}, .*calibrated_sensor\.json"):
+        camera_images(without("calibrated_sensor", cs))
+    sensor = _nusc_tok("sensor", "CAM_FRONT")
+    with pytest.raises(ValueError, match=rf"calibrated_sensor .* refers to sensor {sensor}, .*incomplete or from"):
+        camera_images(without("sensor", sensor))
+    pose = _nusc_tok("sd", "scene-0001", 1, "CAM_FRONT", True)
+    with pytest.raises(ValueError, match=rf"sample_data {pose} refers to ego_pose {pose}, .*ego_pose\.json"):
+        camera_images(without("ego_pose", pose))
+    # Through the loader, from the files on disk.
+    (root / VERSION / "scene.json").write_text(json.dumps([r for r in tables["scene"] if r["token"] != scene]))
+    with pytest.raises(ValueError, match=r"no row in scene\.json"):
+        load_nuscenes_records(root, fixture[1], 0.025, version=VERSION)
+
+
+# ---------------------------------------------------------------- prediction files
+
+
+def test_openpifpaf_0_10_file_names_and_detections(tmp_path):
+    """openpifpaf <= 0.10 (Monoloco's) writes <image>.pifpaf.json, detections without category_id."""
+    assert {"X.jpg.pifpaf.json", "X.png.pifpaf.json", "X.png.predictions.json"} <= set(
+        prediction_file_candidates("samples/CAM_FRONT/X.jpg"))
+    root = tmp_path / "nuscenes"
+    facts = _nusc_write_fixture(root)
+    reference = load_nuscenes_records(root, _write_predictions(tmp_path / "new", facts, "predictions"), 0.05,
+                                      version=VERSION)
+    for style in ("pifpaf", "png.pifpaf"):
+        pred = _write_predictions(tmp_path / style, facts, style)
+        assert all("category_id" not in d for f in pred.glob("*.json") for d in json.loads(f.read_text()))
+        rec = load_nuscenes_records(root, pred, 0.05, version=VERSION)
+        for name in reference:
+            np.testing.assert_array_equal(rec[name], reference[name], err_msg=f"{style}: {name}")
+
+
+def _write_predictions(pred: Path, facts: dict, style: str) -> Path:
+    _nusc_write_predictions(pred, facts, name_style=style)
+    return pred
+
+
+def test_category_id_person_kept_other_classes_skipped(tmp_path):
+    person = _nusc_detection([10.0, 20.0, 30.0, 60.0])
+    path = tmp_path / "X.png.predictions.json"
+    path.write_text(json.dumps([
+        {**person, "category_id": 1},
+        person,  # openpifpaf <= 0.10: no category_id
+        {"bbox": [5.0, 5.0, 50.0, 40.0], "score": 0.9, "category_id": 3},  # a car from a detection head
+        {**_nusc_detection([300.0, 20.0, 30.0, 60.0]), "category_id": 2},
+    ]))
+    keypoints, boxes, scores = read_predictions(path)
+    assert keypoints.shape == (2, 17, 3)
+    np.testing.assert_array_equal(boxes, [[10.0, 20.0, 30.0, 60.0]] * 2)
+    np.testing.assert_array_equal(scores, [0.7, 0.7])
+
+
+def test_missing_file_hint_names_what_the_workflow_writes(fixture):
+    root, pred, facts = fixture
+    image = Path(facts["images"][0][2])
+    (pred / (image.name + ".predictions.json")).unlink()
+    with pytest.raises(ValueError) as info:
+        load_nuscenes_records(root, pred, 0.025, version=VERSION)
+    message = str(info.value)
+    assert f"-> expected {image.stem}.png.predictions.json" in message
+    assert f"{image.name}.predictions.json" in message and f"{image.stem}.png.pifpaf.json" in message  # the others
+
+
+def test_every_prediction_file_is_checked(fixture):
+    """A broken file of an image without any ground-truth pedestrian (CAM_BACK sees nobody) is an error."""
+    root, pred, _ = fixture
+    back = camera_images(read_tables(root, VERSION), ("CAM_BACK",))
+    for image in back:
+        (pred / (Path(image["filename"]).stem + ".png.predictions.json")).write_text("[]")
+    rec = load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+    assert len(rec["depth"]) == 6
+    broken = pred / (Path(back[2]["filename"]).stem + ".png.predictions.json")
+    broken.write_text('[{"keypoints": [1, 2, 3], "bbox": [0, 0, 1, 1]}]')
+    with pytest.raises(ValueError, match=rf"{broken.name}: keypoints must be 51 numbers"):
+        load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+    broken.write_text("[{not json")
+    with pytest.raises(ValueError, match=rf"{broken.name} is not valid JSON"):
+        load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+
+
+def test_enlarge_boxes_is_monolocos():
+    boxes = np.array([[100.0, 200.0, 35.0, 70.0], [5.0, 5.0, 35.0, 70.0], [1580.0, 850.0, 35.0, 70.0]])
+    out = enlarge_boxes(boxes, 1600, 900)  # w/3.5 = 10 px each side, h/7 = 10 px above and below
+    np.testing.assert_allclose(out, [[90, 190, 55, 90], [0, 0, 50, 85], [1570, 840, 30, 60]])
+    np.testing.assert_allclose(enlarge_boxes(boxes[:1], 1600, 900, (0, 0)), boxes[:1])
+    assert enlarge_boxes(np.zeros((0, 4)), 1600, 900).shape == (0, 4)
+    with pytest.raises(ValueError, match="margin"):
+        enlarge_boxes(boxes, 1600, 900, (-0.1, 0.0))
+
+
+def test_matching_uses_the_enlarged_box_and_records_keep_the_raw_one(fixture):
+    """A tight keypoint box (0.45 w x 0.6 h inside the ground-truth box, IoU 0.27) matches only after
+    Monoloco's enlargement (IoU 0.55); the record keeps PifPaf's box."""
+    root, pred, facts = fixture
+    scene, k, filename, k_matrix = facts["images"][0]
+    name = next(n for n, (_, pos) in TRUTH[scene].items() if n.startswith("ped_") and pos[k][2] > 0)
+    gt_box = _nusc_expected_box(TRUTH[scene][name][1][k], k_matrix)
+    tight = np.array([gt_box[0] + 0.275 * gt_box[2], gt_box[1] + 0.2 * gt_box[3], 0.45 * gt_box[2], 0.6 * gt_box[3]])
+    assert box_iou(gt_box, tight)[0, 0] < 0.3 <= box_iou(gt_box, enlarge_boxes(tight, 1600, 900))[0, 0]
+    path = pred / (Path(filename).name + ".predictions.json")
+    dets = json.loads(path.read_text())
+    ious = box_iou(gt_box, np.array([d["bbox"] for d in dets]))[0]
+    dets[int(np.argmax(ious))] = _nusc_detection(tight)
+    path.write_text(json.dumps(dets))
+    depth = TRUTH[scene][name][1][k][2]
+    rec = load_nuscenes_records(root, pred, 0.025, version=VERSION)
+    assert len(rec["depth"]) == 6
+    row = np.flatnonzero(np.isclose(rec["depth"], depth))
+    assert len(row) == 1
+    np.testing.assert_allclose(rec["box"][row[0]], tight, rtol=1e-6)
+    raw = load_nuscenes_records(root, pred, 0.025, version=VERSION, box_margin=None)
+    assert len(raw["depth"]) == 5 and not np.any(np.isclose(raw["depth"], depth))
 
 
 # ---------------------------------------------------------------- noisy images

@@ -379,7 +379,10 @@ def test_normalise_keypoints_known_answer():
     assert out.dtype == np.float32 and out.shape == (17, 3)
     np.testing.assert_allclose(out[0], [10.0, 0.0, 0.7], atol=1e-6)  # 10 * (1800 - 800) / 1000
     np.testing.assert_allclose(out[1], [0.0, 10.0, 0.2], atol=1e-6)  # 10 * (950 - 450) / 500
-    np.testing.assert_array_equal(out[2:], 0.0)  # missed keypoints stay 0
+    # a missed keypoint is PifPaf's placeholder pixel (0, -3) back-projected, whatever its u, v
+    np.testing.assert_allclose(out[2:, :2], np.broadcast_to([10 * (0 - 800) / 1000, 10 * (-3 - 450) / 500], (15, 2)),
+                               atol=1e-5)
+    np.testing.assert_array_equal(out[2:, 2], 0.0)
     k2 = k.copy()
     k2[0, 0] = 2000.0
     batch = normalise_keypoints(np.stack([kp, kp]), np.stack([k, k2]))  # one K per row

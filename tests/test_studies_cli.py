@@ -76,6 +76,15 @@ def test_patience_does_not_rename_checkpoints(tiny_profile):
     assert studies.checkpoint_stem(P, "pendulum", "drf", 0) == studies.checkpoint_stem(patient, "pendulum", "drf", 0)
 
 
+def test_monoloco_trains_on_its_published_schedule_and_the_family_on_the_profile(tiny_profile):
+    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile)))
+    mono = studies.train_config(P, "pedestrians", "monoloco", 0)
+    assert (mono.lr_step, mono.lr_gamma, mono.framewise, mono.grad_clip, mono.select_on) == (20, 0.9, True, None, "l1")
+    assert (mono.epochs, mono.lr, mono.batch_size) == (P.monoloco_epochs, P.monoloco_lr, P.monoloco_batch_size)
+    drf = studies.train_config(P, "pedestrians", "drf", 0)
+    assert (drf.grad_clip, drf.select_on, drf.lr_step, drf.lr) == (10.0, "loss", None, P.ped_lr)
+
+
 def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatch):
     P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile))
                  | {"ped_n_scenes": 4, "ped_frames_per_scene": 4, "ped_data_seed": 77})

@@ -1,4 +1,5 @@
-"""drfkit.timing: the inference benchmark's table, its streaming step and its modes, the CLI."""
+"""drfkit.timing: the inference benchmark's table, the models' streaming steps it times and its
+modes, the CLI; the training-speed studies and the clock."""
 from __future__ import annotations
 
 import math
@@ -10,9 +11,10 @@ import torch
 import yaml
 
 from drfkit import timing
-from drfkit.models import parts
+from drfkit.models import DeepRecursiveFilter, LSTMBaseline, NoDynamics, build_model, default_config, parts
+from drfkit.models.sequence import _EncodedSequenceModel
 from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
-                           inference_benchmark, initial_carry, make_frame_fn, step_features)
+                           inference_benchmark, make_frame_fn)
 
 TINY = dict(n_samples=3, batch_sizes=[1, 2], threads=[1], min_run_time=0.01)
 
@@ -79,20 +81,102 @@ def test_add_ratios_never_mixes_groups():
         add_ratios(pd.DataFrame(rows + [rows[0]]))
 
 
-@pytest.mark.parametrize("study,kind", [("pedestrians", "drf"), ("pedestrians", "lstm"),
-                                        ("pedestrians", "no_dynamics"), ("pedestrians", "monoloco"),
-                                        ("pendulum", "drf")])
+def stream(model, seq):
+    """h of ``seq`` (B, T, ...) stepped frame by frame with the model's own streaming step; the
+    first frame's h is that of ``features`` on it alone (a sequence of one frame)."""
+    first = seq[:, :1]
+    carry = model.initial_carry(first)
+    steps = [model.features(first)[0]]
+    for t in range(1, seq.shape[1]):
+        h, carry = model.stream_step(seq[:, t:t + 1], carry)
+        assert h.shape == (seq.shape[0], 1, steps[0].shape[-1])
+        steps.append(h)
+    return torch.cat(steps, dim=1)
+
+
+STREAM_CASES = [(study, kind) for study, (_, _, kinds) in STUDIES.items() for kind in kinds]
+
+
+@pytest.mark.parametrize("study,kind", STREAM_CASES)
 def test_streaming_steps_reproduce_the_whole_sequence(study, kind):
+    assert {k for _, k in STREAM_CASES} == {"drf", "lstm", "no_dynamics", "monoloco"}
     model = build_timing_model(kind, study)
     seq = example_frames(study, batch=3, n_frames=5, seed=1)
     with torch.no_grad():
         whole, _ = model.features(seq)
-        carry = initial_carry(model, seq[:, :1])
-        steps = [whole[:, :1]]
-        for t in range(1, seq.shape[1]):
-            h, carry = step_features(model, seq[:, t:t + 1], carry)
-            steps.append(h)
-    torch.testing.assert_close(torch.cat(steps, dim=1), whole, rtol=1e-4, atol=1e-5)
+        torch.testing.assert_close(stream(model, seq), whole, rtol=1e-4, atol=1e-5)
+    if kind in ("no_dynamics", "monoloco"):  # per-frame models: no state to carry
+        assert model.per_frame and model.initial_carry(seq[:, :1]) is None
+
+
+@pytest.mark.parametrize("overrides", [{"transition_kind": "basis"}, {"memory_dims": 4}])
+def test_drf_streaming_steps_reproduce_the_protocol_variants(overrides):
+    # memory dims: a streamed later frame is not a sequence's first (prior variance 1 there)
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "keypoints", 1, **overrides)).eval()
+    seq = example_frames("pedestrians", batch=3, n_frames=5, seed=1)
+    with torch.no_grad():
+        torch.testing.assert_close(stream(model, seq), model.features(seq)[0], rtol=1e-4, atol=1e-5)
+
+
+class FeaturesOnlyDRF(DeepRecursiveFilter):  # changes the computation, keeps the parent's step
+    def features(self, inputs, return_gains=False):
+        h, gains = super().features(inputs, return_gains)
+        return 2 * h, gains
+
+
+class FilterOnlyDRF(DeepRecursiveFilter):
+    def run_filter(self, w, r, return_gains=False, whole_sequence=None):
+        return super().run_filter(w, r, return_gains, whole_sequence)
+
+
+class FeaturesOnlyLSTM(LSTMBaseline):
+    def features(self, inputs, return_gains=False):
+        return super().features(inputs.flip(1), return_gains)
+
+
+class RecursiveNoDynamics(NoDynamics):  # a recursion on top of a per-frame model
+    def features(self, inputs, return_gains=False):
+        h, _ = super().features(inputs)
+        return h.cumsum(dim=1), None
+
+
+class NewSequenceModel(_EncodedSequenceModel):  # a new model with state and no streaming step
+    kind = "new"
+
+    def features(self, inputs, return_gains=False):
+        w, r = self.observe(inputs)
+        return parts.mean_and_log_variance(w, r).cumsum(dim=1), None
+
+
+class StreamingDRF(FeaturesOnlyDRF):  # defines its step again: allowed
+    def stream_step(self, frame, carry):
+        h, carry = super().stream_step(frame, carry)
+        return 2 * h, carry
+
+
+@pytest.mark.parametrize("cls,overridden", [(FeaturesOnlyDRF, "features"), (FilterOnlyDRF, "run_filter"),
+                                            (FeaturesOnlyLSTM, "features"), (RecursiveNoDynamics, "features"),
+                                            (NewSequenceModel, None)])
+def test_a_model_without_its_own_streaming_step_raises_instead_of_going_stateless(cls, overridden):
+    model = cls(input_kind="keypoints", out_dim=1).eval()
+    seq = example_frames("pedestrians", batch=2, n_frames=3)
+    model.features(seq)  # the whole-sequence computation itself works
+    match = f"overrides {overridden} but not its streaming step" if overridden else "defines no streaming step"
+    with pytest.raises(NotImplementedError, match=match):
+        model.initial_carry(seq[:, :1])
+    with pytest.raises(NotImplementedError, match=match):
+        model.stream_step(seq[:, 1:2], None)
+    if cls.kind in MODES:  # the benchmark's timed call goes through the same step
+        with pytest.raises(NotImplementedError, match=match):
+            make_frame_fn(model, "no_sampling", seq[:, 1:2], None, 1)()
+
+
+def test_a_subclass_that_defines_its_step_again_streams_its_own_computation():
+    model = StreamingDRF(input_kind="keypoints", out_dim=1).eval()
+    seq = example_frames("pedestrians", batch=2, n_frames=4)
+    with torch.no_grad():
+        torch.testing.assert_close(stream(model, seq), model.features(seq)[0], rtol=1e-4, atol=1e-5)
 
 
 class MaskBank:
@@ -117,7 +201,7 @@ def test_drf_modes_agree_given_the_same_masks_and_filter_once(study, monkeypatch
     model = build_timing_model("drf", study)
     frames = example_frames(study, batch, 2, seed=2)
     with torch.no_grad():
-        carry = initial_carry(model, frames[:, :1])
+        carry = model.initial_carry(frames[:, :1])
     transition_calls = []
     model.transition.register_forward_hook(lambda *_: transition_calls.append(1))
     outputs = {}
@@ -142,7 +226,8 @@ def test_drf_modes_agree_given_the_same_masks_and_filter_once(study, monkeypatch
 def test_monoloco_published_runs_the_whole_net_once_per_sample():
     n_samples, batch = 5, 2
     frames = example_frames("pedestrians", batch, 2)
-    for mode, calls, rows in (("published", n_samples, batch), ("batched", 1, n_samples * batch),
+    # batched: the input layer once (only its dropout is sampled), the rest on all S x batch rows
+    for mode, calls, rows in (("published", n_samples, batch), ("batched", 1, batch),
                               ("no_sampling", 1, batch)):
         model = build_timing_model("monoloco", "pedestrians", mode)
         seen = []
@@ -161,7 +246,7 @@ def test_bad_arguments_fail_early_with_the_fix():
     with pytest.raises(ValueError, match="not timed for lstm"):
         make_frame_fn(model, "naive", frames[:, :1], None, 3)
     with pytest.raises(ValueError, match=r"\(B, 1, \.\.\.\)"):
-        step_features(model, frames, None)
+        model.stream_step(frames, None)
     with pytest.raises(ValueError, match="not part of the pendulum study"):
         build_timing_model("monoloco", "pendulum")
     with pytest.raises(ValueError, match="batch_sizes"):
@@ -273,7 +358,7 @@ def test_training_step_ratio_is_the_median_of_per_round_ratios(monkeypatch):
 
     # per-round ratios 5, 1, 1, 3, 2 (median 2); the ratio of the medians would be 5 / 3
     fake = {"no_dynamics": [1.0, 2.0, 3.0, 4.0, 5.0], "drf": [5.0, 2.0, 3.0, 12.0, 10.0]}
-    monkeypatch.setattr(timing, "interleaved_times", lambda fns, *a, **k: {n: fake[n] for n in fns})
+    monkeypatch.setattr(timing.training, "interleaved_times", lambda fns, *a, **k: {n: fake[n] for n in fns})
     configs = {k: default_config(k, "keypoints", 1) for k in ("no_dynamics", "drf")}
     speed = timing.training_step_times(configs, example_frames("pedestrians", 2, 3), torch.rand(2, 3, 1) + 5.0,
                                        n_batches_per_epoch=2, min_run_time=0.01, threads=1)
@@ -320,7 +405,7 @@ def test_recursion_scaling_splits_fixed_cost_and_takes_per_round_floors(monkeypa
         seen.append(sorted(fns))
         return {"base": base, "drf": drf} | {f"recursion_{b}": t for b, t in rec.items()}
 
-    monkeypatch.setattr(timing, "interleaved_times", fake)
+    monkeypatch.setattr(timing.training, "interleaved_times", fake)
     configs = {k: default_config(k, "pendulum", 2) for k in ("no_dynamics", "drf")}
     inputs, targets = example_frames("pendulum", 2, 3), torch.rand(2, 3, 2)
     table = timing.recursion_scaling(configs["no_dynamics"], configs["drf"], inputs, targets, threads=1)

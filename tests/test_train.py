@@ -316,3 +316,42 @@ def test_an_unfinished_run_resumes_only_with_its_thread_count(tmp_path):
         train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "t", progress=False)
     torch.set_num_threads(1)
     assert train_model(cfg, train, val, train_cfg(epochs=3), tmp_path / "t", progress=False).resumed_from == 1
+
+
+def test_selection_on_validation_l1_keeps_the_epoch_with_the_lowest_l1(tmp_path):
+    train, val = tiny_data()
+    cfg = model_config("pendulum", "no_dynamics")
+    res = train_model(cfg, train, val, TrainConfig(epochs=4, lr=3e-3, batch_size=4, seed=0, select_on="l1"),
+                      tmp_path / "l1", progress=False)
+    l1 = [h["val_l1"] for h in res.history]
+    assert res.best_epoch == int(np.argmin(l1)) + 1 and res.best_val_loss == min(l1)
+    model = load_checkpoint(res.best_path)
+    with torch.no_grad():
+        mean, _ = model(val.inputs)
+    assert float((mean - val.targets).abs().mean()) == pytest.approx(min(l1), rel=1e-5)
+    with pytest.raises(ValueError, match="select_on"):
+        TrainConfig(epochs=1, lr=1e-3, batch_size=1, seed=0, select_on="mae")
+
+
+def test_later_fields_at_their_defaults_leave_names_and_fingerprints_as_before():
+    from drfkit.io import param_hash
+    from drfkit.train import fingerprint, naming_fields
+
+    cfg = train_cfg()
+    before = {k: v for k, v in vars(cfg).items() if k != "select_on"}  # a run made before select_on existed
+    assert naming_fields(cfg) == {k: v for k, v in before.items() if k != "patience"}
+    assert fingerprint({}, cfg, "d") == param_hash({"model": {}, "train": {k: v for k, v in before.items()
+                                                                            if k not in ("epochs", "patience")},
+                                                     "data": "d"})
+    assert naming_fields(TrainConfig(epochs=4, lr=3e-3, batch_size=4, seed=0, select_on="l1"))["select_on"] == "l1"
+
+
+def test_no_gradient_clipping_when_grad_clip_is_none(tmp_path, monkeypatch):
+    seen = []
+    real = torch.nn.utils.clip_grad_norm_
+    monkeypatch.setattr(torch.nn.utils, "clip_grad_norm_", lambda params, max_norm: seen.append(max_norm) or
+                        real(params, max_norm))
+    train, val = tiny_data()
+    train_model(model_config("pendulum", "no_dynamics"), train, val,
+                TrainConfig(epochs=1, lr=3e-3, batch_size=4, seed=0, grad_clip=None), tmp_path / "n", progress=False)
+    assert seen and all(m == float("inf") for m in seen)

@@ -12,30 +12,50 @@ Pipeline for one noise level p
 1. ``python -m drfkit.data.nuscenes noisify --root R --out NOISY --p 0.025`` writes
    salt-and-pepper copies of the keyframe camera images (lossless PNG by default, so the
    noise is exactly the paper's, at the same relative path with a ``.png`` suffix).
-2. On a machine with PifPaf: ``python -m openpifpaf.predict NOISY/samples/CAM_FRONT/*.png
-   --json-output predictions/p0.025`` (one ``<image file name>.predictions.json`` per image).
+2. On a machine with PifPaf: ``mkdir -p predictions/p0.025`` (openpifpaf takes a missing
+   folder as a file name), then ``python -m openpifpaf.predict NOISY/samples/CAM_FRONT/*.png
+   --json-output predictions/p0.025`` (one ``<image file name>.predictions.json`` per image,
+   here ``X.png.predictions.json``).
 3. ``load_nuscenes_records(R, 'predictions/p0.025', 0.025)``.
 
-Choices (the paper is silent)
------------------------------
-* Cameras: CAM_FRONT only by default (``DEFAULT_CAMERAS``), like the simulation and the
-  paper's "about 3300 images"; Monoloco used all six (pass ``ALL_CAMERAS``). A track is one
-  pedestrian instance seen by one camera, ordered by timestamp.
+Choices (the paper is silent), and where they differ from Monoloco's nuScenes preparation
+-----------------------------------------------------------------------------------------
+* Cameras: CAM_FRONT only by default (``DEFAULT_CAMERAS``); Monoloco used all six (pass
+  ``ALL_CAMERAS``). The book follows the DRF paper: its "about 3300 images" and the
+  simulated stand-in are front-camera. A track is one pedestrian instance seen by one
+  camera, ordered by timestamp.
 * Keyframes only (``is_key_frame``), 2 Hz, where the annotations are.
-* Pedestrians: categories ``human.pedestrian.*``. Kept when the box centre is in front of
-  the camera (z > 0) and at least one of the 8 box corners projects inside the image
-  (Monoloco's rule); the 2D ground-truth box is the projected corners' extent clipped to the
-  image (corners behind the camera left out).
-* Matching: a detection is matched to a ground-truth box by IoU >= 0.3, greedily by
+* Classes: ``human.pedestrian.*`` only; Monoloco also kept bicycles and motorcycles (nuScenes
+  annotates a rider as part of the cycle's box), but the paper's study is pedestrians.
+* Keep rule: the devkit's ``box_in_image(box, K, imsize, vis_level=BoxVisibility.ANY)``,
+  which Monoloco used (``box_in_image_any``): every box corner more than 0.1 m in front of
+  the camera and at least one corner visible (inside the image and more than 1 m in front).
+* Ground-truth 2D box: the extent of the 8 projected box corners clipped to the image.
+  Monoloco projected a box of the annotation's width and height standing at the centre's
+  depth (its centre plane); the corner extent is the box the whole 3D box covers in the
+  image, and it is a little larger for near or turned pedestrians.
+* Matching: PifPaf boxes are enlarged as Monoloco did before matching (``enlarge_boxes``:
+  w/3.5 left and right, h/7 above and below, clipped to the image; ``box_margin=None``
+  matches the raw box), then matched to a ground-truth box by IoU >= 0.3, greedily by
   decreasing IoU, one-to-one; unmatched boxes (missed people) and unmatched detections
-  (false positives, other classes) are dropped.
+  (false positives, other classes) are dropped. The records keep PifPaf's raw box.
 * Prediction file names: for an image ``samples/CAM_FRONT/X.jpg`` the loader accepts
-  ``X.jpg.predictions.json`` (openpifpaf's convention), ``X.jpg.json``, ``X.png.predictions.json``
-  or ``X.png.json`` (the noisy PNG copies), anywhere under the predictions folder.
-* Keypoints with confidence 0 are set to (0, 0, 0); NaN keypoints are an error naming the file.
+  ``X.jpg.predictions.json`` (openpifpaf >= 0.11), ``X.jpg.pifpaf.json`` (openpifpaf <= 0.10,
+  the versions Monoloco used), ``X.jpg.json``, and the same three for the noisy PNG copy
+  (``X.png.predictions.json``, ``X.png.pifpaf.json``, ``X.png.json``), anywhere under the
+  predictions folder. Every prediction file of the level is read and checked, also those of
+  images with no ground-truth pedestrian.
+* Detections: ``keypoints`` (51 numbers) and ``bbox`` (x, y, w, h, as openpifpaf's own
+  predict writes it in every version; files from Monoloco's own PifPaf wrapper hold
+  x0, y0, x1, y1 instead and must be converted first) are required; ``score`` and
+  ``category_id`` are not (openpifpaf <= 0.10 writes no ``category_id``). A detection whose
+  ``category_id`` is present and not 1 (COCO person) is skipped: it is another class (e.g.
+  from a detection head in the same run), which the matching would drop anyway. Keypoints
+  with confidence 0 are set to (0, 0, 0); NaN keypoints are an error naming the file.
 * Ids: scene_id = position of the scene in scene.json sorted by name; image_id = position of
   the camera image sorted by (timestamp, channel); track_id = position of (scene, instance,
-  camera) in sorted order.
+  camera) in sorted order. A token that points to no row of its table is an error naming
+  both tokens and the table.
 """
 from __future__ import annotations
 
@@ -60,6 +80,8 @@ ALL_CAMERAS = ("CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_RIGHT", "CAM_BACK", "CA
 DEFAULT_CAMERAS = ("CAM_FRONT",)
 PEDESTRIAN_PREFIX = "human.pedestrian."
 MIN_IOU = 0.3
+MONOLOCO_BOX_MARGIN = (1 / 3.5, 1 / 7)  # PifPaf box grown by w/3.5 on each side and h/7 above and below
+PERSON_CATEGORY_ID = 1  # COCO 'person', what openpifpaf >= 0.11 writes for human poses
 
 
 # --------------------------------------------------------------------------- tables
@@ -118,6 +140,17 @@ def box_corners(center: np.ndarray, size: np.ndarray, rotation: np.ndarray) -> n
     return np.einsum("...ij,...kj->...ki", rot, local) + center[..., None, :]
 
 
+def _lookup(rows: Mapping[str, object], table: str, token: str, referrer: str):
+    """``rows[token]``, or a ValueError naming the referring row, the table and the token."""
+    try:
+        return rows[token]
+    except (KeyError, TypeError):
+        raise ValueError(
+            f"{referrer} refers to {table} {token}, which has no row in {table}.json; "
+            "the tables are incomplete or from different versions"
+        ) from None
+
+
 def camera_images(tables: Mapping[str, list[dict]], cameras: Iterable[str] = DEFAULT_CAMERAS) -> list[dict]:
     """Keyframe images of the given camera channels, sorted by (timestamp, channel).
 
@@ -137,11 +170,13 @@ def camera_images(tables: Mapping[str, list[dict]], cameras: Iterable[str] = DEF
     for sd in tables["sample_data"]:
         if not sd.get("is_key_frame", False):
             continue
-        cs = calib[sd["calibrated_sensor_token"]]
-        channel = sensors[cs["sensor_token"]]["channel"]
+        referrer = f"sample_data {sd['token']}"
+        cs = _lookup(calib, "calibrated_sensor", sd["calibrated_sensor_token"], referrer)
+        channel = _lookup(sensors, "sensor", cs["sensor_token"], f"calibrated_sensor {cs['token']}")["channel"]
         if channel not in cameras:
             continue
-        pose = poses[sd["ego_pose_token"]]
+        pose = _lookup(poses, "ego_pose", sd["ego_pose_token"], referrer)
+        sample = _lookup(samples, "sample", sd["sample_token"], referrer)
         intrinsics = np.asarray(cs["camera_intrinsic"], dtype=np.float64)
         if intrinsics.shape != (3, 3):
             raise ValueError(f"calibrated_sensor {cs['token']} of {channel} has no 3x3 camera_intrinsic")
@@ -151,7 +186,7 @@ def camera_images(tables: Mapping[str, list[dict]], cameras: Iterable[str] = DEF
             "timestamp": int(sd["timestamp"]),
             "channel": channel,
             "sample_token": sd["sample_token"],
-            "scene_token": samples[sd["sample_token"]]["scene_token"],
+            "scene_token": sample["scene_token"],
             "width": int(sd.get("width", 1600)),
             "height": int(sd.get("height", 900)),
             "intrinsics": intrinsics,
@@ -170,17 +205,44 @@ def global_to_camera(points: np.ndarray, image: Mapping[str, np.ndarray]) -> np.
     return (ego - image["t_cam"]) @ image["R_cam"]
 
 
+def project_points(points_cam: np.ndarray, intrinsics: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (u, v), each (...,), of camera-frame points (..., 3) under a 3x3 K:
+    K [x, y, z] divided by its third entry (the devkit's ``view_points(..., normalize=True)``).
+    Points at or behind the camera give inf/NaN or mirrored values; callers mask them."""
+    uvw = np.asarray(points_cam, np.float64) @ np.asarray(intrinsics, np.float64).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return uvw[..., 0] / uvw[..., 2], uvw[..., 1] / uvw[..., 2]
+
+
+def box_in_image_any(corners_cam: np.ndarray, intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
+    """The devkit's ``box_in_image(box, K, (width, height), vis_level=BoxVisibility.ANY)`` per box.
+
+    corners_cam (..., 8, 3) box corners in the camera frame, intrinsics (3, 3) -> bool (...,).
+    A box is kept when EVERY corner is more than 0.1 m in front of the camera (z > 0.1) and
+    at least one corner is visible: projected strictly inside the image (0 < u < width and
+    0 < v < height) and more than 1 m in front (z > 1).
+    """
+    corners_cam = np.asarray(corners_cam, np.float64)
+    if corners_cam.shape[-2:] != (8, 3):
+        raise ValueError(f"corners_cam must have shape (..., 8, 3), got {corners_cam.shape}")
+    u, v = project_points(corners_cam, intrinsics)
+    z = corners_cam[..., 2]
+    visible = (u > 0) & (u < width) & (v > 0) & (v < height) & (z > 1)
+    in_front = z > 0.1
+    return visible.any(axis=-1) & in_front.all(axis=-1)
+
+
 def project_annotations(
     tables: Mapping[str, list[dict]],
     cameras: Iterable[str] = DEFAULT_CAMERAS,
 ) -> dict[str, np.ndarray]:
     """Ground-truth pedestrians per keyframe camera image, in the camera frame.
 
-    One row per (image, pedestrian annotation) kept by the rules in the module docstring,
-    sorted by (scene_id, track_id, timestamp). Returns:
+    One row per (image, pedestrian annotation) whose box passes ``box_in_image_any`` (the
+    devkit's keep rule), sorted by (scene_id, track_id, timestamp). Returns:
       'position' float64 (G,3) box centre in the camera frame; 'box' float64 (G,4) x, y, w, h
-      of the projected 3D box clipped to the image; 'intrinsics' (G,3,3); 'image_index' (G,)
-      position in ``camera_images(tables, cameras)``; 'track_id', 'scene_id', 'timestamp',
+      of the extent of the 8 projected box corners, clipped to the image; 'intrinsics'
+      (G,3,3); 'image_index' (G,) position in ``camera_images(tables, cameras)``; 'track_id', 'scene_id', 'timestamp',
       'image_id' int64 (G,); 'instance_token', 'channel' (G,) str.
     """
     cameras = tuple(cameras)
@@ -197,6 +259,7 @@ def project_annotations(
 
     rows = []
     for index, image in enumerate(images):
+        scene_id = _lookup(scene_order, "scene", image["scene_token"], f"sample {image['sample_token']}")
         anns = by_sample.get(image["sample_token"], [])
         if not anns:
             continue
@@ -205,21 +268,16 @@ def project_annotations(
         centres_cam = global_to_camera(centres, image)  # (A,3)
         corners_cam = global_to_camera(corners, image)  # (A,8,3)
         k = image["intrinsics"]
-        in_front = corners_cam[..., 2] > 1e-3
-        z = np.where(in_front, corners_cam[..., 2], 1.0)
-        uvw = corners_cam @ k.T  # (A,8,3): K [x, y, z]
-        u, v = uvw[..., 0] / z, uvw[..., 1] / z
         width, height = image["width"], image["height"]
-        corner_inside = in_front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
-        keep = (centres_cam[:, 2] > 0) & corner_inside.any(axis=1)
+        keep = box_in_image_any(corners_cam, k, width, height)  # (A,): all corners ahead, so u, v finite
+        u, v = project_points(corners_cam, k)  # (A,8)
         for a in np.flatnonzero(keep):
-            uu, vv = u[a][in_front[a]], v[a][in_front[a]]
-            x0, x1 = np.clip(uu.min(), 0, width), np.clip(uu.max(), 0, width)
-            y0, y1 = np.clip(vv.min(), 0, height), np.clip(vv.max(), 0, height)
+            x0, x1 = np.clip(u[a].min(), 0, width), np.clip(u[a].max(), 0, width)
+            y0, y1 = np.clip(v[a].min(), 0, height), np.clip(v[a].max(), 0, height)
             rows.append({
                 "position": centres_cam[a], "box": np.array([x0, y0, x1 - x0, y1 - y0]),
                 "intrinsics": k, "image_index": index, "timestamp": image["timestamp"],
-                "scene_id": scene_order[image["scene_token"]], "instance_token": anns[a]["instance_token"],
+                "scene_id": scene_id, "instance_token": anns[a]["instance_token"],
                 "channel": image["channel"],
             })
     if not rows:
@@ -243,17 +301,35 @@ def project_annotations(
 
 # --------------------------------------------------------------------------- predictions
 def prediction_file_candidates(image_filename: str) -> list[str]:
-    """File names that may hold the PifPaf output of a nuScenes image (see module docstring)."""
+    """File names that may hold the PifPaf output of a nuScenes image, in order of preference.
+
+    For ``.../X.jpg``: ``X.jpg.predictions.json`` (openpifpaf >= 0.11), ``X.jpg.pifpaf.json``
+    (openpifpaf <= 0.10), ``X.jpg.json``, then the same for the noisy PNG copy ``X.png``.
+    """
     base = Path(image_filename).name
     stem = Path(image_filename).stem
-    return [f"{base}.predictions.json", f"{base}.json", f"{stem}.png.predictions.json", f"{stem}.png.json"]
+    names = []
+    for image_name in (base, f"{stem}.png"):
+        for suffix in (".predictions.json", ".pifpaf.json", ".json"):
+            if image_name + suffix not in names:
+                names.append(image_name + suffix)
+    return names
+
+
+def expected_prediction_file(image_filename: str) -> str:
+    """The file the README workflow makes for an image: openpifpaf.predict (>= 0.11) on the
+    noisy PNG copy of ``.../X.jpg`` writes ``X.png.predictions.json``."""
+    return f"{Path(image_filename).stem}.png.predictions.json"
 
 
 def read_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One PifPaf ``--json-output`` file -> keypoints (D,17,3), boxes (D,4) x,y,w,h, scores (D,).
 
-    Keypoints with confidence 0 are zeroed; NaN/inf or a malformed detection is an error
-    naming the file.
+    Each detection needs 'keypoints' (51 numbers) and 'bbox' (x, y, w, h); 'score' (NaN when
+    absent) and 'category_id' are optional (openpifpaf <= 0.10 writes no category_id). A
+    detection whose category_id is present and not 1 (COCO person) is skipped: it is not a
+    person. Keypoints with confidence 0 are zeroed; NaN/inf or a malformed detection is an
+    error naming the file.
     """
     path = Path(path)
     try:
@@ -265,6 +341,8 @@ def read_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, n
         raise ValueError(f"PifPaf prediction file {path} must hold a JSON list of detections")
     kps, boxes, scores = [], [], []
     for d in detections:
+        if isinstance(d, dict) and d.get("category_id") not in (None, PERSON_CATEGORY_ID):
+            continue  # another class (e.g. a detection head's output in the same run): not a person
         try:
             kp = np.asarray(d["keypoints"], dtype=np.float64)
             box = np.asarray(d["bbox"], dtype=np.float64)
@@ -284,6 +362,28 @@ def read_predictions(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, n
     keypoints[..., 2] = np.clip(keypoints[..., 2], 0.0, 1.0)
     keypoints[keypoints[..., 2] == 0] = 0.0  # a missed keypoint is (0, 0, 0)
     return keypoints, np.asarray(boxes, dtype=np.float64).reshape(-1, 4), np.asarray(scores, dtype=np.float64)
+
+
+def enlarge_boxes(
+    boxes: np.ndarray,
+    width: float,
+    height: float,
+    margin: tuple[float, float] = MONOLOCO_BOX_MARGIN,
+) -> np.ndarray:
+    """Monoloco's enlargement of PifPaf boxes before IoU matching: boxes (D,4) x, y, w, h ->
+    (D,4) x, y, w, h grown by margin[0] * w on the left and on the right and margin[1] * h
+    above and below (Monoloco: w/3.5 and h/7), then clipped to the image [0, width] x [0, height].
+    margin=(0, 0) only clips."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    mw, mh = (float(m) for m in margin)
+    if not (mw >= 0 and mh >= 0):
+        raise ValueError(f"box margin must be two fractions >= 0 (Monoloco: (1/3.5, 1/7)), got {margin}")
+    dw, dh = mw * boxes[:, 2], mh * boxes[:, 3]
+    x0 = np.clip(boxes[:, 0] - dw, 0, width)
+    y0 = np.clip(boxes[:, 1] - dh, 0, height)
+    x1 = np.clip(boxes[:, 0] + boxes[:, 2] + dw, 0, width)
+    y1 = np.clip(boxes[:, 1] + boxes[:, 3] + dh, 0, height)
+    return np.stack([x0, y0, x1 - x0, y1 - y0], axis=1)
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -334,14 +434,17 @@ def load_nuscenes_records(
     version: str = "v1.0-mini",
     cameras: Iterable[str] = DEFAULT_CAMERAS,
     min_iou: float = MIN_IOU,
+    box_margin: tuple[float, float] | None = MONOLOCO_BOX_MARGIN,
 ) -> dict[str, np.ndarray]:
     """Pedestrian records (``drfkit.data.records``) from nuScenes + PifPaf at noise level noise_p.
 
     Every keyframe image of ``cameras`` must have a prediction file in ``predictions_dir``
-    (names: ``prediction_file_candidates``); extra files are ignored. Returns one row per
-    detection matched to a ground-truth pedestrian box (IoU >= min_iou), sorted by
-    (scene_id, track_id, timestamp); position/depth/distance come from the annotation, box
-    and keypoints from PifPaf.
+    (names: ``prediction_file_candidates``), and every one of them is read and checked (also
+    for images without a ground-truth pedestrian); extra files are ignored. PifPaf boxes are
+    enlarged by ``enlarge_boxes(..., box_margin)`` for the matching only (None: the raw box).
+    Returns one row per detection matched to a ground-truth pedestrian box (IoU >= min_iou),
+    sorted by (scene_id, track_id, timestamp); position/depth/distance come from the
+    annotation, box (PifPaf's raw box) and keypoints from PifPaf.
     """
     if not 0 <= float(noise_p) <= 1:
         raise ValueError(f"noise_p must lie in [0, 1], got {noise_p}")
@@ -349,9 +452,12 @@ def load_nuscenes_records(
     if not predictions_dir.is_dir():
         raise FileNotFoundError(
             f"PifPaf predictions folder {predictions_dir} not found; write noisy images with "
-            f"`python -m drfkit.data.nuscenes noisify --p {noise_p:g}` and run "
+            f"`python -m drfkit.data.nuscenes noisify --p {noise_p:g}`, then `mkdir -p {predictions_dir}` "
+            f"(openpifpaf takes a missing folder as a file name) and run "
             f"`python -m openpifpaf.predict ... --json-output {predictions_dir}` on them"
         )
+    if box_margin is not None:
+        enlarge_boxes(np.zeros((0, 4)), 1, 1, box_margin)  # a bad margin fails before any file is read
     tables = read_tables(root, version)
     cameras = tuple(cameras)
     images = camera_images(tables, cameras)
@@ -361,10 +467,13 @@ def load_nuscenes_records(
         match = next((files[n] for n in prediction_file_candidates(image["filename"]) if n in files), None)
         (found if match is not None else missing).append(match if match is not None else image["filename"])
     if missing:
+        expected = expected_prediction_file(missing[0])
+        others = [n for n in prediction_file_candidates(missing[0]) if n != expected]
         raise ValueError(
             f"{predictions_dir} holds prediction files for {len(found)} of the {len(images)} keyframe images "
-            f"of {cameras} ({len(missing)} missing, e.g. {missing[0]} -> expected "
-            f"{prediction_file_candidates(missing[0])[0]}); run PifPaf on every image of this noise level"
+            f"of {cameras} ({len(missing)} missing, e.g. {missing[0]} -> expected {expected}, what "
+            f"openpifpaf.predict writes for its noisy PNG copy; also accepted: {', '.join(others)}); "
+            "run PifPaf on every image of this noise level"
         )
     gt = project_annotations(tables, cameras)
     rows: list[tuple[int, np.ndarray, np.ndarray]] = []  # (gt row, keypoints, box)
@@ -372,11 +481,13 @@ def load_nuscenes_records(
     for g, index in enumerate(gt["image_index"]):
         gt_rows_of_image.setdefault(int(index), []).append(g)
     for index, path in enumerate(found):
+        keypoints, boxes, _ = read_predictions(path)  # every file, so a broken one never passes unnoticed
         g_rows = gt_rows_of_image.get(index)
         if not g_rows:
             continue
-        keypoints, boxes, _ = read_predictions(path)
-        for g, d in match_boxes(gt["box"][g_rows], boxes, min_iou):
+        image = images[index]
+        match_on = boxes if box_margin is None else enlarge_boxes(boxes, image["width"], image["height"], box_margin)
+        for g, d in match_boxes(gt["box"][g_rows], match_on, min_iou):
             rows.append((g_rows[g], keypoints[d], boxes[d]))
     if not rows:
         raise ValueError(

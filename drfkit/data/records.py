@@ -190,12 +190,20 @@ def _allocate(n: int, fractions: tuple[float, ...]) -> np.ndarray:
     return counts
 
 
+# Where openpifpaf writes a keypoint it missed (u, v in pixels, confidence 0). Monoloco's
+# network saw these placeholders back-projected like any keypoint, so the normalised input
+# keeps them there; the DRF family's encoder ignores keypoints of confidence 0.
+PIFPAF_MISSED_UV = (0.0, -3.0)
+
+
 def normalise_keypoints(keypoints: np.ndarray, intrinsics: np.ndarray) -> np.ndarray:
     """Back-project pixel keypoints to normalised camera coordinates times 10 (as Monoloco).
 
     keypoints (..., 17, 3) pixel u, v, conf; intrinsics (..., 3, 3) with the same leading
     shape (or broadcastable to it). Returns float32 (..., 17, 3): x, y = 10 * (K^-1 [u, v, 1])
-    [:2], confidence kept. Missed keypoints (conf == 0) stay (0, 0, 0). NaN/inf is rejected.
+    [:2], confidence kept. A missed keypoint (conf == 0) becomes PifPaf's placeholder pixel
+    ``PIFPAF_MISSED_UV`` back-projected, with conf 0, whatever its pixel values (as in
+    Monoloco's input). NaN/inf is rejected.
     """
     kp = np.asarray(keypoints, dtype=np.float64)
     k = np.asarray(intrinsics, dtype=np.float64)
@@ -206,12 +214,12 @@ def normalise_keypoints(keypoints: np.ndarray, intrinsics: np.ndarray) -> np.nda
     if not np.all(np.isfinite(kp)):
         raise ValueError("keypoints contain NaN or inf; encode missed keypoints as (0, 0, 0)")
     k_inv = np.linalg.inv(k)  # (..., 3, 3); K is upper triangular and well conditioned
-    homog = np.concatenate([kp[..., :2], np.ones_like(kp[..., :1])], axis=-1)  # (..., 17, 3)
+    detected = kp[..., 2:3] > 0
+    uv = np.where(detected, kp[..., :2], np.asarray(PIFPAF_MISSED_UV))
+    homog = np.concatenate([uv, np.ones_like(kp[..., :1])], axis=-1)  # (..., 17, 3)
     rays = np.einsum("...ij,...kj->...ki", k_inv, homog)  # (..., 17, 3)
     xy = 10.0 * rays[..., :2] / rays[..., 2:3]
-    detected = kp[..., 2:3] > 0
-    out = np.concatenate([np.where(detected, xy, 0.0), kp[..., 2:3]], axis=-1)
-    return out.astype(np.float32)
+    return np.concatenate([xy, kp[..., 2:3]], axis=-1).astype(np.float32)
 
 
 def make_sequences(

@@ -1,7 +1,9 @@
 """Monoloco (Bertoni et al., ICCV 2019): the per-frame pedestrian distance baseline.
 
-Input: the 17 keypoints' (x, y), already normalised (10 K^-1 [u, v, 1]), centred on the
-middle of the bounding box of the keypoints with confidence > 0 -> 34 numbers.
+Input: the 17 keypoints' (x, y), already normalised (10 K^-1 [u, v, 1]; a missed keypoint
+is PifPaf's placeholder pixel back-projected, ``drfkit.data.records.PIFPAF_MISSED_UV``),
+centred on the middle of the bounding box around all 17, placeholders included, as the
+published code does -> 34 numbers.
 Network: Linear(34, 256) -> BN -> ReLU -> Dropout, three residual blocks of two
 (Linear(256, 256) -> BN -> ReLU -> Dropout), Linear(256, 2) -> (mu, s). 407,810 params.
 
@@ -10,11 +12,13 @@ Laplace(mu, b) with b = exp(s) |mu|, i.e. sigma = sqrt(2) exp(s) |mu|. The loss 
 s = log(sigma / (sqrt(2) |mu|)) from (mean, sigma); ``head`` keeps |mu| >= MU_FLOOR in
 that product so the inversion never divides by zero.
 
-Monte Carlo dropout: the whole MLP is stochastic, so the "head" is the whole network and
-``features`` only centres the keypoints. BatchNorm always uses its running statistics
-while sampling (only dropout is switched on), as Monoloco does at test time. The S
-passes run either folded into one batch ('batched') or one after another
-('sequential', as published; kept for the timing study).
+Monte Carlo dropout as in the published code: only the first, top-level dropout (after the
+input layer) is switched on at test time; the residual blocks' six dropouts stay off (they
+are on in training). With the same weights this gives about half the spread of mu of
+switching on all seven. The "head" is the whole network and ``features`` only centres the
+keypoints. BatchNorm always uses its running statistics while sampling, as Monoloco does at
+test time. The S passes run either folded into one batch after one run of the input layer
+('batched') or one after another ('sequential', as published; kept for the timing study).
 """
 from __future__ import annotations
 
@@ -23,7 +27,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from drfkit.models.parts import N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples
+from drfkit.models.parts import (N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples,
+                                 keypoint_box_centre)
 from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding, frame_mask,
                                     masked_mean)
 
@@ -34,27 +39,13 @@ MC_MODES = ("batched", "sequential")
 _LOG_SQRT2 = 0.5 * math.log(2.0)
 
 
-def keypoint_box_centre(keypoints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """(..., 17, 3) -> centre (..., 1, 2) of the bounding box of the detected keypoints
-    (confidence > 0) and the (x, y) relative to it (..., 17, 2). Missed keypoints stay at 0
-    (the box centre) instead of landing at minus the centre; a frame with no keypoint is all 0.
-    """
-    xy = keypoints[..., :2]
-    seen = (keypoints[..., 2] > 0).unsqueeze(-1)  # (..., 17, 1)
-    big = torch.finfo(xy.dtype).max
-    lo = torch.where(seen, xy, big).amin(dim=-2, keepdim=True)
-    hi = torch.where(seen, xy, -big).amax(dim=-2, keepdim=True)
-    any_seen = seen.any(dim=-2, keepdim=True)
-    centre = torch.where(any_seen, 0.5 * (lo + hi), 0.0)
-    return centre, torch.where(seen, xy - centre, 0.0)
-
-
 def centre_keypoints(keypoints: torch.Tensor) -> torch.Tensor:
-    """(B, T, 17, 3) -> (B, T, 34): Monoloco's input, (x, y) minus the centre of the bounding
-    box of the detected keypoints (``keypoint_box_centre``). Layout: x0, y0, x1, y1, ...
+    """(B, T, 17, 3) -> (B, T, 34): Monoloco's input as published, the 17 (x, y) minus the
+    centre of the bounding box around all of them, the placeholders of missed keypoints
+    included (``keypoint_box_centre(..., include_missed=True)``). Layout: x0, y0, x1, y1, ...
     """
     check_keypoints(keypoints)
-    return keypoint_box_centre(keypoints)[1].flatten(-2)
+    return keypoint_box_centre(keypoints, include_missed=True)[1].flatten(-2)
 
 
 class Monoloco(SequenceModel):
@@ -65,8 +56,7 @@ class Monoloco(SequenceModel):
     """
 
     kind = "monoloco"
-    training_defaults = {"lr": 2e-3, "epochs": 150, "batch_size": 256,
-                         "lr_step": 20, "lr_gamma": 0.9, "grad_clip": None}
+    per_frame = True
 
     def __init__(self, input_kind: str = "keypoints", out_dim: int = 1, hidden: int = 256,
                  n_blocks: int = 3, dropout_p: float = 0.2, mc_mode: str = "batched"):
@@ -99,16 +89,26 @@ class Monoloco(SequenceModel):
                          training=bn_batch_stats, momentum=norm.momentum, eps=norm.eps)
         return F.dropout(F.relu(x), p, training=dropout_on)
 
-    def mlp(self, x: torch.Tensor, p: float, dropout_on: bool, bn_batch_stats: bool
-            ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(N, 34) -> mu (N,), s (N,) with explicit dropout / BatchNorm modes."""
-        x = self._layer(x, self.input_layer, self.input_norm, p, dropout_on, bn_batch_stats)
+    def _first(self, x: torch.Tensor, bn_batch_stats: bool) -> torch.Tensor:
+        """(N, 34) -> (N, hidden): the input layer up to (not including) its dropout."""
+        return self._layer(x, self.input_layer, self.input_norm, 0.0, False, bn_batch_stats)
+
+    def _rest(self, y: torch.Tensor, p: float, dropout_on: bool, bn_batch_stats: bool
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, hidden) after the first dropout -> mu (N,), s (N,): the residual blocks and output."""
         for i in range(0, len(self.layers), 2):
-            y = self._layer(x, self.layers[i], self.norms[i], p, dropout_on, bn_batch_stats)
-            y = self._layer(y, self.layers[i + 1], self.norms[i + 1], p, dropout_on, bn_batch_stats)
-            x = x + y
-        out = self.output_layer(x)
+            z = self._layer(y, self.layers[i], self.norms[i], p, dropout_on, bn_batch_stats)
+            z = self._layer(z, self.layers[i + 1], self.norms[i + 1], p, dropout_on, bn_batch_stats)
+            y = y + z
+        out = self.output_layer(y)
         return out[:, 0], out[:, 1]
+
+    def mlp(self, x: torch.Tensor, p: float, dropout_on: bool, bn_batch_stats: bool,
+            first_dropout_only: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 34) -> mu (N,), s (N,) with explicit dropout / BatchNorm modes. Training uses all
+        seven dropouts; Monte Carlo sampling (``first_dropout_only``) only the input layer's."""
+        y = F.dropout(self._first(x, bn_batch_stats), p, training=dropout_on)
+        return self._rest(y, p, dropout_on and not first_dropout_only, bn_batch_stats)
 
     @staticmethod
     def mean_and_sigma(mu: torch.Tensor, s: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -131,12 +131,14 @@ class Monoloco(SequenceModel):
         if p == 0.0:  # identical samples: compute once
             mu, s = self.mlp(x, p, dropout_on=False, bn_batch_stats=False)
             mu, s = (v.unsqueeze(0).expand(n_samples, -1) for v in (mu, s))
-        elif self.mc_mode == "batched":
-            folded = x.unsqueeze(0).expand(n_samples, -1, -1).reshape(n_samples * b * t, -1)
+        elif self.mc_mode == "batched":  # the input layer once, its dropout masks for all S at once
+            first = self._first(x, bn_batch_stats=False)
+            folded = F.dropout(first.unsqueeze(0).expand(n_samples, -1, -1), p, training=True)
             mu, s = (v.view(n_samples, b * t) for v in
-                     self.mlp(folded, p, dropout_on=True, bn_batch_stats=False))
+                     self._rest(folded.reshape(n_samples * b * t, -1), p, dropout_on=False, bn_batch_stats=False))
         else:
-            passes = [self.mlp(x, p, dropout_on=True, bn_batch_stats=False) for _ in range(n_samples)]
+            passes = [self.mlp(x, p, dropout_on=True, bn_batch_stats=False, first_dropout_only=True)
+                      for _ in range(n_samples)]
             mu = torch.stack([m for m, _ in passes])
             s = torch.stack([v for _, v in passes])
         mean, sigma = self.mean_and_sigma(mu, s)

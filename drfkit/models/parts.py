@@ -111,13 +111,34 @@ class KeypointEncoder(nn.Module):
         self.out_dim = feature_dim
 
     def forward(self, keypoints: torch.Tensor) -> torch.Tensor:
-        from drfkit.models.monoloco import keypoint_box_centre
-
         check_keypoints(keypoints)
         keypoints = keypoints.to(self.net[0].weight.dtype)
         centre, centred = keypoint_box_centre(keypoints)  # (B, T, 1, 2), (B, T, 17, 2)
         x = torch.cat([centred.flatten(-2), centre.flatten(-2), keypoints[..., 2]], dim=-1)
         return self.net(x)
+
+
+def keypoint_box_centre(keypoints: torch.Tensor, include_missed: bool = False
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(..., 17, 3) -> centre (..., 1, 2) of the bounding box of the keypoints and their
+    (x, y) relative to it (..., 17, 2).
+
+    ``include_missed=False`` (the DRF family's encoder): the box of the detected keypoints
+    (confidence > 0); missed ones are set to 0 (the box centre) instead of landing at minus the
+    centre, and a frame with no keypoint is all 0. ``include_missed=True`` (Monoloco as
+    published): the box of all 17, missed keypoints' placeholders included, every one centred.
+    """
+    xy = keypoints[..., :2]
+    if include_missed:
+        centre = 0.5 * (xy.amin(dim=-2, keepdim=True) + xy.amax(dim=-2, keepdim=True))
+        return centre, xy - centre
+    seen = (keypoints[..., 2] > 0).unsqueeze(-1)  # (..., 17, 1)
+    big = torch.finfo(xy.dtype).max
+    lo = torch.where(seen, xy, big).amin(dim=-2, keepdim=True)
+    hi = torch.where(seen, xy, -big).amax(dim=-2, keepdim=True)
+    any_seen = seen.any(dim=-2, keepdim=True)
+    centre = torch.where(any_seen, 0.5 * (lo + hi), 0.0)
+    return centre, torch.where(seen, xy - centre, 0.0)
 
 
 def check_keypoints(keypoints: torch.Tensor) -> None:

@@ -12,7 +12,17 @@ rely on:
                                  the stochastic part, (B, T, out) or (S, B, T, out)
     model(x) -> (mean, sigma)    = head(features(x))
     model.loss(mean, sigma, targets, mask=None) -> scalar
-    model.default_dropout_p, model.kalman_gains(x), model.training_defaults
+    model.default_dropout_p, model.kalman_gains(x)
+    model.initial_carry(frame) -> carry
+                                 the state carried after a sequence's first frame (B, 1, ...)
+    model.stream_step(frame, carry) -> (h (B, 1, D), carry)
+                                 one online step on the next frame (B, 1, ...); frame by frame
+                                 from initial_carry it gives the h of features(x) on the whole
+                                 sequence. A model with no state across frames sets
+                                 ``per_frame = True`` and inherits the stateless step; one with
+                                 state defines both (see ``SequenceModel``)
+
+Training schedules are not the models' business: ``drfkit.studies.train_config`` holds them.
 
 Inputs: 'pendulum' uint8 images (B, T, 24, 24); 'keypoints' float32 (B, T, 17, 3).
 Outputs: pendulum (B, T, 2) = (cos theta, sin theta); pedestrians (B, T, 1) depth (m).
@@ -32,11 +42,6 @@ from drfkit.models.parts import (IMAGE_DOWNSAMPLES, NOISE_HEADS, Decoder, ImageE
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 
 INPUT_KINDS = ("pendulum", "keypoints")
-
-# Adam, lr 1e-4 and 200 epochs are the paper's; batch 50 and clipping the gradient norm
-# at 10 (a guard against the odd exploding step through the recursion) are ours.
-DRF_TRAINING_DEFAULTS = {"lr": 1e-4, "epochs": 200, "batch_size": 50,
-                         "lr_step": None, "lr_gamma": 1.0, "grad_clip": 10.0}
 
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 
@@ -96,18 +101,67 @@ def gaussian_nll(mean: torch.Tensor, sigma: torch.Tensor, targets: torch.Tensor,
     return masked_mean(per_value, mask)
 
 
+def check_frame(frame: torch.Tensor) -> None:
+    """A streaming step's input: one frame per sequence, (B, 1, ...)."""
+    if not isinstance(frame, torch.Tensor) or frame.ndim != 4 or frame.shape[1] != 1:
+        shape = tuple(frame.shape) if isinstance(frame, torch.Tensor) else type(frame).__name__
+        raise ValueError(f"a streaming step takes one frame per sequence, shape (B, 1, ...), got {shape}; "
+                         f"slice a sequence with x[:, t:t + 1]")
+
+
+def _streaming_mismatch(cls: type) -> str | None:
+    """Why ``cls`` may not use the streaming step it inherits, or None.
+
+    The class that declares ``cls``'s streaming (defines ``stream_step``, or sets ``per_frame``
+    for the stateless default) must be ``cls`` or a subclass of every class defining one of ``cls.stream_follows``: a
+    subclass that changes ``features`` (or, for the DRF, its filter loop) without its own step
+    would otherwise stream a different computation than it runs on whole sequences.
+    """
+    mro = cls.__mro__
+
+    def first(names: tuple[str, ...]) -> int:
+        return next((i for i, klass in enumerate(mro) if any(n in vars(klass) for n in names)), len(mro))
+
+    stateless = cls.stream_step is SequenceModel.stream_step  # per_frame only speaks for the default step
+    declared = first(("stream_step", "per_frame") if stateless else ("stream_step",))
+    if mro[declared] is SequenceModel:  # nothing declared: its default step raises unless per_frame
+        return None
+    stale = [name for name in cls.stream_follows if first((name,)) < declared]
+    if not stale:
+        return None
+    owner = mro[declared].__name__
+    return (f"{cls.__name__} overrides {', '.join(stale)} but not its streaming step, so {owner}'s step "
+            f"would stream another computation than its features: define initial_carry(frame) and "
+            f"stream_step(frame, carry) for {cls.__name__}"
+            + (", or set per_frame = True if it carries no state across frames" if stateless else ""))
+
+
 class SequenceModel(nn.Module):
-    """Shared interface (see the module docstring); subclasses define ``features``."""
+    """Shared interface (see the module docstring); subclasses define ``features``.
+
+    Streaming: the default ``initial_carry`` / ``stream_step`` here are stateless (``features``
+    of the one frame, carry None) and serve only models that declare ``per_frame = True`` (no
+    recursion: NoDynamics, Monoloco); any other model raises NotImplementedError from them until
+    it defines its own (DeepRecursiveFilter, LSTMBaseline). A subclass that overrides one of
+    ``stream_follows`` without redefining its streaming step raises too (``_streaming_mismatch``).
+    """
 
     kind: str = ""
-    training_defaults: dict[str, Any] = DRF_TRAINING_DEFAULTS
+    #: True: the features of frame t depend on frame t alone, and the stateless streaming step holds
+    per_frame: bool = False
+    #: the methods whose computation the streaming step reproduces frame by frame
+    stream_follows: tuple[str, ...] = ("features",)
+    _stream_error: str | None = None  # set per class by __init_subclass__
+
+    def __init_subclass__(cls, **kwargs: Any):
+        super().__init_subclass__(**kwargs)
+        cls._stream_error = _streaming_mismatch(cls)
 
     def __init__(self, config: dict[str, Any]):
         super().__init__()
         self.config = {"kind": self.kind, **config}
         self.input_kind = config["input_kind"]
         self.out_dim = config["out_dim"]
-        self.training_defaults = dict(type(self).training_defaults)
 
     def features(self, inputs: torch.Tensor, return_gains: bool = False
                  ) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -132,6 +186,37 @@ class SequenceModel(nn.Module):
     def kalman_gains(self, inputs: torch.Tensor) -> torch.Tensor | None:
         """Kalman gains (B, T, n, n) of the filter, None for models without one."""
         return self.features(inputs, return_gains=True)[1]
+
+    def _check_streaming(self, frame: torch.Tensor) -> None:
+        if self._stream_error:
+            raise NotImplementedError(self._stream_error)
+        check_frame(frame)
+
+    def _check_per_frame(self) -> None:
+        if not self.per_frame:
+            raise NotImplementedError(
+                f"{type(self).__name__} defines no streaming step: define initial_carry(frame) and "
+                f"stream_step(frame, carry) for a model with state across frames, or set per_frame = True "
+                f"if its features of a frame depend on that frame alone")
+
+    def initial_carry(self, frame: torch.Tensor) -> Any:
+        """The state carried after a sequence's first frame ``frame`` (B, 1, ...), from which
+        ``stream_step`` continues. Here (per-frame models): None."""
+        self._check_streaming(frame)
+        self._check_per_frame()
+        return None
+
+    def stream_step(self, frame: torch.Tensor, carry: Any) -> tuple[torch.Tensor, Any]:
+        """One streaming step: the deterministic features h (B, 1, D) of the next ``frame``
+        (B, 1, ...) given the carried state, and the state after it.
+
+        Stepping a sequence frame by frame from ``initial_carry`` of its first frame gives the
+        same h as ``features`` on the whole sequence (tests/test_timing.py checks it). Here
+        (per-frame models): ``features`` of the frame alone, carry None.
+        """
+        self._check_streaming(frame)
+        self._check_per_frame()
+        return self.features(frame)[0], None
 
 
 class _EncodedSequenceModel(SequenceModel):
@@ -174,6 +259,7 @@ class NoDynamics(_EncodedSequenceModel):
     """Frame by frame: decoder([w_t, log r_t]); no state carried over time."""
 
     kind = "no_dynamics"
+    per_frame = True
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)
@@ -201,6 +287,21 @@ class LSTMBaseline(_EncodedSequenceModel):
         w, r = self.observe(inputs)
         h, _ = self.lstm(mean_and_log_variance(w, r))
         return h, None
+
+    def initial_carry(self, frame: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The LSTM's state (h_n, c_n), each (lstm_layers, B, 2n), after the first frame
+        (B, 1, ...)."""
+        self._check_streaming(frame)
+        _, hc = self.lstm(mean_and_log_variance(*self.observe(frame)))
+        return hc
+
+    def stream_step(self, frame: torch.Tensor, carry: tuple[torch.Tensor, torch.Tensor]
+                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+        """One LSTM step on the next frame (B, 1, ...) from the carried (h, c): the output
+        h (B, 1, 2n) and the new (h_n, c_n), each (lstm_layers, B, 2n)."""
+        self._check_streaming(frame)
+        h, hc = self.lstm(mean_and_log_variance(*self.observe(frame)), carry)
+        return h, hc
 
 
 TRANSITION_KINDS = ("lstm", "basis")
@@ -233,6 +334,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     """
 
     kind = "drf"
+    stream_follows = ("features", "run_filter", "filter_steps")
     #: train through the one-node recursion; False differentiates the per-step loop with autograd
     #: (same values, slower: kept for the tests and for timing the difference, not a config option)
     whole_sequence = True
@@ -259,14 +361,16 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         else:
             self.transition = TransitionNetwork(latent, transition_hidden)
 
-    def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def observe(self, inputs: torch.Tensor, starts: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+        """w, r (B, T, n); ``starts``: inputs[:, 0] is a sequence's first frame, where a memory
+        dim has its prior variance 1 (False for a streaming step's later frame)."""
         w, r = super().observe(inputs)
         m = self.memory_dims
         if not m:
             return w, r
         observed = torch.arange(self.latent, device=w.device) < self.latent - m          # (n,)
         first = torch.zeros(w.shape[1], 1, dtype=torch.bool, device=w.device)
-        first[0] = True                                                                   # (T, 1)
+        first[0] = starts                                                                 # (T, 1)
         w = torch.where(observed, w, 0.0)
         r = torch.where(observed, r, torch.where(first, 1.0, MEMORY_VARIANCE))
         return w, r
@@ -333,3 +437,26 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         w, r = self.observe(inputs)
         z, p_diag, gains = self.run_filter(w, r, return_gains)
         return mean_and_log_variance(z, p_diag), gains
+
+    def initial_carry(self, frame: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, tuple]:
+        """The filter's state after the first frame (B, 1, ...): z_0 = w_0 (B, n),
+        P_0 = diag(r_0) (B, n, n) and the transition's initial state -- exactly what
+        ``filter_steps`` starts from."""
+        self._check_streaming(frame)
+        w, r = self.observe(frame)
+        z, p_diag = w[:, 0], r[:, 0]
+        return z, torch.diag_embed(p_diag), self.transition.initial_state(z.shape[0], z)
+
+    def stream_step(self, frame: torch.Tensor, carry: tuple[torch.Tensor, torch.Tensor, tuple]
+                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor, tuple]]:
+        """One filter step on the next frame (B, 1, ...) from the carried (z, P, state) of the
+        previous one: encoder, transition F_t, q_t from z_{t-1}, Kalman predict/update with
+        w_t, r_t. Returns h = [z_t, log diag P_t] (B, 1, 2n) and (z_t (B, n), P_t (B, n, n),
+        the transition's state)."""
+        self._check_streaming(frame)
+        z, P, state = carry
+        w, r = self.observe(frame, starts=False)
+        F_t, q_t, state = self.transition(z, state)
+        z, P, _ = kalman_step(z, P, F_t, q_t, w[:, 0], r[:, 0])
+        h = mean_and_log_variance(z, P.diagonal(dim1=-2, dim2=-1)).unsqueeze(1)
+        return h, (z, P, state)

@@ -1,0 +1,80 @@
+"""The MC-dropout prediction cache: a hit gives the very numbers a fresh prediction gives, and
+any change to what made a prediction (weights, inputs, rates, samples, seed) misses."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+import drfkit.predictions as predictions
+from drfkit.evaluate import evaluate_model_rates
+from drfkit.models import build_model, default_config
+from drfkit.train import SequenceData
+from drfkit.uncertainty import predict_rates
+
+torch.set_num_threads(1)
+
+
+def small_case():
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "keypoints", 1)).eval()
+    g = torch.Generator().manual_seed(1)
+    x = torch.randn(4, 5, 17, 3, generator=g)
+    x[..., 2] = torch.rand(4, 5, 17, generator=g)
+    return model, SequenceData(x, torch.rand(4, 5, 1, generator=g) * 20 + 5)
+
+
+def fields(p):
+    return (p.mean, p.aleatoric, p.epistemic, p.total)
+
+
+def test_cached_equals_uncached_bit_for_bit_and_a_hit_computes_nothing(tmp_path, monkeypatch):
+    model, data = small_case()
+    torch.manual_seed(3)
+    fresh = predict_rates(model, data.inputs, n_samples=7, dropout_rates=[None, 0.3], batch_size=2)
+    first = predictions.cached_predict_rates(model, data.inputs, cache=tmp_path, n_samples=7,
+                                             dropout_rates=[None, 0.3], seed=3, batch_size=2)
+    assert len(list(tmp_path.glob("*.pt"))) == 1
+    monkeypatch.setattr(predictions, "predict_rates", lambda *a, **k: pytest.fail("a cache hit must not predict"))
+    again = predictions.cached_predict_rates(model, data.inputs, cache=tmp_path, n_samples=7,
+                                             dropout_rates=[None, 0.3], seed=3, batch_size=2)
+    for a, b, c in zip(fresh, first, again):
+        assert all(torch.equal(u, v) and torch.equal(v, w) for u, v, w in zip(fields(a), fields(b), fields(c)))
+        assert a.dropout_p == c.dropout_p and a.n_samples == c.n_samples
+
+
+def test_the_metrics_through_the_cache_are_those_without_it(tmp_path):
+    model, data = small_case()
+    torch.manual_seed(5)
+    plain = evaluate_model_rates(model, data, n_samples=6, dropout_rates=[None, 0.2])
+    cold = evaluate_model_rates(model, data, n_samples=6, dropout_rates=[None, 0.2], seed=5, cache=tmp_path)
+    warm = evaluate_model_rates(model, data, n_samples=6, dropout_rates=[None, 0.2], seed=5, cache=tmp_path)
+    assert plain == cold == warm
+
+
+@pytest.mark.parametrize("change", ["seed", "n_samples", "rates", "weights", "inputs", "batch"])
+def test_any_change_to_what_made_a_prediction_misses(tmp_path, change):
+    model, data = small_case()
+    args = dict(cache=tmp_path, n_samples=5, dropout_rates=[None], seed=0, batch_size=None)
+    predictions.cached_predict_rates(model, data.inputs, **args)
+    inputs = data.inputs
+    if change == "weights":
+        with torch.no_grad():
+            next(model.parameters()).add_(1e-3)
+    elif change == "inputs":
+        inputs = inputs.clone()
+        inputs[0, 0, 0, 0] += 1e-3
+    else:
+        args |= {"seed": {"seed": 1}, "n_samples": {"n_samples": 6}, "rates": {"dropout_rates": [0.3]},
+                 "batch": {"batch_size": 2}}[change]
+    predictions.cached_predict_rates(model, inputs, **args)
+    assert len(list(tmp_path.glob("*.pt"))) == 2
+
+
+def test_a_damaged_entry_is_computed_again(tmp_path):
+    model, data = small_case()
+    args = dict(cache=tmp_path, n_samples=4, dropout_rates=[None], seed=2)
+    good = predictions.cached_predict_rates(model, data.inputs, **args)[0]
+    (path,) = tmp_path.glob("*.pt")
+    path.write_bytes(b"truncated")
+    again = predictions.cached_predict_rates(model, data.inputs, **args)[0]
+    assert torch.equal(good.mean, again.mean) and path.stat().st_size > 100
