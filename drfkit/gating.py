@@ -45,6 +45,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from drfkit import registry
 from drfkit.evaluate import prediction_metrics
 from drfkit.models.parts import check_dropout_p, check_n_samples
 from drfkit.timing import interleaved_times
@@ -515,7 +516,7 @@ def sweep_gate(model, gate: Gate, test, **kwargs) -> tuple[pd.DataFrame, pd.Data
 def evaluation_level(P, study: str) -> float:
     """The test noise of the gating table: the largest evaluation level (out of distribution;
     the paper's pedestrian always-dropout row, 89.7 % / 12.9 m, is its DRF point at p = 0.05)."""
-    return max(P.pend_eval_max_noise) if study == "pendulum" else max(P.ped_eval_p)
+    return max(registry.study(study).eval_levels(P))
 
 
 @torch.no_grad()
@@ -547,8 +548,7 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     """
     from drfkit import studies
 
-    if study not in ("pendulum", "pedestrians"):
-        raise ValueError(f"study must be 'pendulum' or 'pedestrians', got {study!r}")
+    registry.study(study)  # a clear error for an unknown study, before any work
     models = models if models is not None else studies.trained_models(P, study)
     drf = {seed: m for (kind, seed), m in models.items() if kind == "drf"}
     if not drf:
@@ -556,8 +556,7 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     device = studies.pick_device(P.device)
     level_ = evaluation_level(P, study)
     val_level = level_ if val_noise is None else float(val_noise)
-    data = studies.pendulum_data if study == "pendulum" else studies.pedestrian_data
-    val, test = data(P, "val", val_level), data(P, "test", level_)
+    val, test = studies.study_data(P, study, "val", val_level), studies.study_data(P, study, "test", level_)
     tables, sweeps, vals = [], [], []
     for seed, model in sorted(drf.items()):
         model = model.to(device)

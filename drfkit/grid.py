@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+from drfkit import registry
 from drfkit.params import ParameterError
 
 
@@ -62,7 +63,7 @@ def notebook_values(values: dict[str, Any], notebook: str):
 
 def study_protocols(P, study: str) -> list[str]:
     """The protocols a profile's training notebook trains for ``study``."""
-    return list(P.pend_protocols) if study == "pendulum" else ["paper"]
+    return registry.study(study).protocols(P)
 
 
 def grid_runs(S, values: dict[str, Any], studies: Iterable[str] | None = None, kinds: list[str] | None = None,
@@ -116,7 +117,7 @@ def run_finished_on_disk(S, P, run: Run) -> bool:
         state = torch_load_checked(last)
         cfg = S.train_config(P, run.study, run.kind, run.seed, run.protocol)
         fp = fingerprint(S.model_config(run.study, run.kind, P, run.protocol), cfg,
-                         param_hash(S.STUDIES[run.study]["key"](P, run.protocol)))
+                         param_hash(S.study_data_key(P, run.study, run.protocol)))
         return state.get("fingerprint") == fp and run_finished(state["epoch"], state["best_epoch"], cfg)
     except (CorruptArtefactError, KeyError, TypeError, AttributeError):  # the task says what is wrong
         return False

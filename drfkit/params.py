@@ -22,6 +22,7 @@ import yaml
 
 from drfkit.paths import PARAMS_DIR
 from drfkit.protocols import ABLATION_BUDGETS, PROTOCOLS, VARIANTS
+from drfkit.registry import STUDIES
 
 
 class ParameterError(ValueError):
@@ -40,9 +41,9 @@ def _in01(v: float) -> bool:
     return 0.0 <= v <= 1.0
 
 
-PEND_MODELS = ("drf", "no_dynamics", "lstm")
-PED_MODELS = ("drf", "no_dynamics", "lstm", "monoloco")
-STUDY_NAMES = ("pendulum", "pedestrians")
+PEND_MODELS = STUDIES["pendulum"].kinds
+PED_MODELS = STUDIES["pedestrians"].kinds
+STUDY_NAMES = tuple(STUDIES)
 
 SPECS: dict[str, Spec] = {
     # -- common -----------------------------------------------------------------------
@@ -79,6 +80,8 @@ SPECS: dict[str, Spec] = {
     "pend_book_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1, "epochs of the book's protocol"),
     "pend_book_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "pend_book_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
+    "pend_book_patience": Spec("int", "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                               "stop a book-protocol run after this many epochs without a better validation NLL"),
     # -- the dynamics study (notebook 01) ------------------------------------------------------
     "bound_particles": Spec("int", "an integer >= 10", lambda v: v >= 10,
                             "particles of the true-physics bound (drfkit.oracle)"),
@@ -139,7 +142,7 @@ _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
-               "pend_book_epochs", "pend_book_batch_size", "pend_book_lr"]
+               "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
 _DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",

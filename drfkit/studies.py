@@ -16,6 +16,7 @@ from typing import Any
 import pandas as pd
 import torch
 
+from drfkit import registry
 from drfkit.io import atomic_write_csv, param_hash
 from drfkit.paths import data_dir, models_dir, tables_dir
 from drfkit.protocols import PROTOCOLS, protocol_spec
@@ -101,19 +102,18 @@ def _pedestrian_data_key(P, protocol: str = "paper") -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------- training
-STUDIES = {
-    "pendulum": {"input_kind": "pendulum", "out_dim": 2, "data": pendulum_data, "key": _pendulum_data_key},
-    "pedestrians": {"input_kind": "keypoints", "out_dim": 1, "data": pedestrian_data, "key": _pedestrian_data_key},
-}
-
-
 def study_data(P, study: str, split: str, noise: float | None = None, protocol: str = "paper") -> SequenceData:
-    """A split of either study at a noise level (default: the training noise)."""
-    return STUDIES[study]["data"](P, split, noise, protocol)
+    """A split of any study (``drfkit.registry``) at a noise level (default: the training noise)."""
+    return globals()[registry.study(study).data](P, split, noise, protocol)
+
+
+def study_data_key(P, study: str, protocol: str = "paper") -> dict[str, Any]:
+    """What names a study's training and validation data in checkpoint hashes."""
+    return globals()[registry.study(study).data_key](P, protocol)
 
 
 def study_models(P, study: str) -> list[str]:
-    return list(P.pend_models if study == "pendulum" else P.ped_models)
+    return registry.study(study).models(P)
 
 
 _TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once
@@ -138,7 +138,7 @@ def model_config(study: str, kind: str, P=None, protocol: str = "paper") -> dict
     its published design (metres directly)."""
     from drfkit.models import default_config
 
-    spec = STUDIES[study]
+    spec = registry.study(study)
     overrides = {}
     if study == "pedestrians":
         _pedestrian_protocol(protocol)
@@ -146,7 +146,7 @@ def model_config(study: str, kind: str, P=None, protocol: str = "paper") -> dict
             overrides = target_statistics(P)
     else:
         overrides = dict(protocol_spec(protocol, kind)["model"])
-    return default_config(kind, spec["input_kind"], spec["out_dim"], **overrides)
+    return default_config(kind, spec.input_kind, spec.out_dim, **overrides)
 
 
 def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -> TrainConfig:
@@ -157,7 +157,7 @@ def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -
     selected on validation L1 of mu."""
     if study == "pendulum" and protocol == "book":  # the book's schedule: its own profile keys
         return TrainConfig(epochs=P.pend_book_epochs, lr=P.pend_book_lr, batch_size=P.pend_book_batch_size,
-                           seed=seed, patience=P.pend_patience)
+                           seed=seed, patience=P.pend_book_patience)
     if study == "pendulum":
         return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed,
                            patience=P.pend_patience)
@@ -171,7 +171,7 @@ def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -
 def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper"):
     cfg = model_config(study, kind, P, protocol)
     key = param_hash({"model": cfg, "train": naming_fields(train_config(P, study, kind, seed, protocol)),
-                      "data": STUDIES[study]["key"](P, protocol)}, 8)
+                      "data": study_data_key(P, study, protocol)}, 8)
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 
 
@@ -188,10 +188,9 @@ def train_models(P, study: str, progress: bool = True, kinds: list[str] | None =
     (only when the whole set is trained; ``kinds`` / ``seeds`` pick a subset, as the
     command line below does to spread training over processes or sessions).
     """
-    spec = STUDIES[study]
     device = pick_device(P.device)
-    train, val = spec["data"](P, "train", None, protocol), spec["data"](P, "val", None, protocol)
-    data_key = param_hash(spec["key"](P, protocol))
+    train, val = study_data(P, study, "train", None, protocol), study_data(P, study, "val", None, protocol)
+    data_key = param_hash(study_data_key(P, study, protocol))
     results, curves = {}, []
     for kind in kinds or study_models(P, study):
         for seed in seeds or P.seeds:
@@ -220,7 +219,8 @@ def trained_models(P, study: str, progress: bool = False, protocol: str = "paper
 
 
 # ------------------------------------------------------------------------ command line
-TRAINING_NOTEBOOK = {"pendulum": "01_pendulum_training", "pedestrians": "02_nuscenes_training"}
+STUDIES = registry.STUDIES
+TRAINING_NOTEBOOK = {name: s.training_notebook for name, s in STUDIES.items()}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -425,7 +425,8 @@ def selection_audit(curves, patience: int):
 def history_frame(history: list[dict[str, float]]):
     import pandas as pd
 
-    frame = pd.DataFrame(history, columns=["epoch", "train_loss", "val_loss", "lr", "seconds", "device"])
+    l1 = ["val_l1"] if any("val_l1" in h for h in history) else []  # runs selected on validation L1
+    frame = pd.DataFrame(history, columns=["epoch", "train_loss", "val_loss", *l1, "lr", "seconds", "device"])
     # epochs recorded before the 'device' field existed were all trained on CPU in this book
     return frame.fillna({"device": "cpu"})
 

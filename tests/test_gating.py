@@ -160,7 +160,7 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     served = []
 
-    def fake_data(P, split, noise_p=None):
+    def fake_data(P, split, noise_p=None, protocol="paper"):
         served.append((split, noise_p))
         return val if split == "val" else test
 

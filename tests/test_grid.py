@@ -181,12 +181,12 @@ def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny
     # one run finished, one cut short after its first epoch, both by the sequential code
     assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",
                          "--threads", "1"]) == 0
-    spec = studies.STUDIES["pendulum"]
     from drfkit.io import param_hash
 
-    train_model(studies.model_config("pendulum", "lstm", P), spec["data"](P, "train"), spec["data"](P, "val"),
-                studies.train_config(P, "pendulum", "lstm", 1), _stem(tiny, "lstm", 1),
-                data_key=param_hash(spec["key"](P)), progress=False, stop_after_epochs=1)
+    train_model(studies.model_config("pendulum", "lstm", P), studies.study_data(P, "pendulum", "train"),
+                studies.study_data(P, "pendulum", "val"), studies.train_config(P, "pendulum", "lstm", 1),
+                _stem(tiny, "lstm", 1), data_key=param_hash(studies.study_data_key(P, "pendulum")), progress=False,
+                stop_after_epochs=1)
     finished = Path(f"{_stem(tiny, 'drf', 0)}-best.pt")
     mtime = finished.stat().st_mtime_ns
     capsys.readouterr()

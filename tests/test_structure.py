@@ -65,3 +65,21 @@ def test_no_import_circle_inside_drfkit():
     assert "drfkit.models.parts" in graph and "drfkit.studies" in graph  # the walk found the package
     cycle = find_cycle(graph)
     assert cycle is None, "import circle: " + " -> ".join(cycle)
+
+
+def test_every_registered_study_is_wired_end_to_end():
+    """Each entry of drfkit.registry names data functions that exist, profile keys the schema
+    knows (and its training notebook accepts), a training notebook, and model kinds that build."""
+    from drfkit import studies
+    from drfkit.models import MODEL_CLASSES
+    from drfkit.params import NOTEBOOKS, SPECS
+    from drfkit.registry import STUDIES
+
+    for name, s in STUDIES.items():
+        assert callable(getattr(studies, s.data)) and callable(getattr(studies, s.data_key)), name
+        assert s.training_notebook in NOTEBOOKS, name
+        keys = [s.models_key, s.train_level_key, s.eval_levels_key, s.sweep_key] + ([s.protocols_key] if s.protocols_key else [])
+        assert all(k in SPECS for k in keys), (name, [k for k in keys if k not in SPECS])
+        assert all(k in NOTEBOOKS[s.training_notebook] for k in (s.models_key, s.train_level_key)), name
+        assert set(s.kinds) <= set(MODEL_CLASSES), name
+        assert studies.TRAINING_NOTEBOOK[name] == s.training_notebook

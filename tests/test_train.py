@@ -325,6 +325,9 @@ def test_selection_on_validation_l1_keeps_the_epoch_with_the_lowest_l1(tmp_path)
                       tmp_path / "l1", progress=False)
     l1 = [h["val_l1"] for h in res.history]
     assert res.best_epoch == int(np.argmin(l1)) + 1 and res.best_val_loss == min(l1)
+    from drfkit.train import history_frame
+
+    assert history_frame(res.history)["val_l1"].tolist() == l1  # the training curves keep it
     model = load_checkpoint(res.best_path)
     with torch.no_grad():
         mean, _ = model(val.inputs)

@@ -42,13 +42,16 @@ import numpy as np
 import pandas as pd
 import torch
 
+from drfkit.registry import STUDIES as REGISTRY
 from drfkit.timing.clock import _single_calls, _warm_timer, load_average
 
-# study -> (input kind, out_dim, models); the pedestrian study is the one the paper times.
+BASELINE = ("monoloco", "published")  # the denominator of ratio_to_monoloco_published
+
+# study -> (input kind, out_dim, models) from drfkit.registry; the pedestrian study, the one the paper
+# times, first, and Monoloco (the baseline of every ratio) first among its models
 STUDIES: dict[str, tuple[str, int, tuple[str, ...]]] = {
-    "pedestrians": ("keypoints", 1, ("monoloco", "drf", "no_dynamics", "lstm")),
-    "pendulum": ("pendulum", 2, ("drf", "no_dynamics", "lstm")),
-}
+    name: (s.input_kind, s.out_dim, tuple(sorted(s.kinds, key=lambda k: k != BASELINE[0])))
+    for name, s in sorted(REGISTRY.items(), key=lambda item: item[0] != "pedestrians")}
 # model -> the modes it is timed in (see the module docstring)
 MODES: dict[str, tuple[str, ...]] = {
     "monoloco": ("published", "batched", "no_sampling"),
@@ -56,7 +59,6 @@ MODES: dict[str, tuple[str, ...]] = {
     "no_dynamics": ("batched", "no_sampling"),
     "lstm": ("batched", "no_sampling"),
 }
-BASELINE = ("monoloco", "published")  # the denominator of ratio_to_monoloco_published
 COLUMNS = ["study", "model", "mode", "n_samples", "batch", "threads", "device", "median_ms_per_frame",
            "iqr_ms_per_frame", "median_ms_per_call", "ratio_to_monoloco_published", "ratio_to_no_sampling",
            "load_1min"]
