@@ -51,4 +51,4 @@ clean:
 	find results -mindepth 1 -maxdepth 1 ! -name paper -exec rm -rf {} +
 	rm -rf .pytest_cache
 	find . -name __pycache__ -type d -not -path './$(VENV)/*' -prune -exec rm -rf {} +
-	rm -rf results/paper/data
+	rm -rf results/paper/data results/paper/predictions
