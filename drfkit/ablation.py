@@ -50,21 +50,26 @@ def _as_data(arrays: dict) -> SequenceData:
     return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
 
 
-def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
-                progress: bool = True) -> dict[str, Any]:
-    """Train (or resume) one variant at one seed and return its validation row."""
+def _run(name: str, seed: int, budget_name: str, out: str | Path | None) -> tuple[dict, dict, Path, str]:
+    """(budget, spec, budget folder, key) of one variant run; the key covers all that trains it."""
     if budget_name not in BUDGETS:
         raise ValueError(f"unknown budget {budget_name!r}; choose from {sorted(BUDGETS)}")
     budget, spec = BUDGETS[budget_name], variant_spec(name)
     root = Path(out) if out is not None else results_root() / "ablation"
-    folder, cache = root / budget_name, root / "data"
     key = param_hash({"budget": budget, "spec": spec, "seed": seed, "data_seed": DATA_SEED}, 8)
-    row_path = folder / f"{name}-seed{seed}.json"
-    if row_path.exists():
-        row = json.loads(row_path.read_text())
-        if row.get("key") == key:
-            return row
+    return budget, spec, root / budget_name, key
 
+
+def data_dir(out: str | Path | None) -> Path:
+    """The data cache of an ablation folder (shared by every budget)."""
+    return (Path(out) if out is not None else results_root() / "ablation") / "data"
+
+
+def train_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
+                  progress: bool = True):
+    """Train (or resume, or load when finished) one variant at one seed; returns (TrainResult, key)."""
+    budget, spec, folder, key = _run(name, seed, budget_name, out)
+    cache = data_dir(out)
     train = _split(cache, budget, "train", spec["train_max_noise"])
     if spec["blackouts"]:
         train = with_random_blackouts(train, spec["blackouts"]["fraction"], tuple(spec["blackouts"]["lengths"]),
@@ -72,9 +77,24 @@ def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Pat
     val = _split(cache, budget, "val", spec["train_max_noise"])
     config = {"kind": spec["kind"], "input_kind": "pendulum", "out_dim": 2, **spec["model"]}
     cfg = TrainConfig(epochs=budget["epochs"], lr=budget["lr"], batch_size=budget["batch_size"], seed=seed)
-    t0 = time.perf_counter()
     res = train_model(config, _as_data(train), _as_data(val), cfg, folder / "models" / f"{name}-seed{seed}-{key}",
                       data_key=key, progress=progress)
+    return res, key
+
+
+def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
+                progress: bool = True) -> dict[str, Any]:
+    """Train (or resume) one variant at one seed and return its validation row."""
+    budget, spec, folder, key = _run(name, seed, budget_name, out)
+    cache = data_dir(out)
+    row_path = folder / f"{name}-seed{seed}.json"
+    if row_path.exists():
+        row = json.loads(row_path.read_text())
+        if row.get("key") == key:
+            return row
+
+    t0 = time.perf_counter()
+    res, _ = train_variant(name, seed, budget_name, out, progress)
     seconds = time.perf_counter() - t0
     model = load_checkpoint(res.best_path)
 

@@ -26,6 +26,7 @@ from drfkit.data.pendulum import blackout_frames, with_blackout
 from drfkit.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
 from drfkit.paths import predictions_dir
 from drfkit.predictions import cached_predict_rates
+from drfkit.progress import steps
 
 BLACKOUT_SEED_OFFSET = 11  # the blackout's pixel noise: split seed + this
 
@@ -49,7 +50,7 @@ def mechanism_table(P, models: dict[tuple[str, int], Any], level: float, split: 
     gains on the blackout version of ``split``'s clean and pure-noise frames."""
     test, dark = studies.pendulum_split(P, split, level), blackout_split(P, split)
     rows = []
-    for (kind, seed), model in models.items():
+    for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {level:g}", len(models)):
         row = {"model": kind, "seed": seed, "noise": float(level),
                **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
         if kind == "drf":
@@ -63,7 +64,7 @@ def blackout_curves(P, models: dict[tuple[str, int], Any], split: str = "test") 
     """MAE per frame of every (model, seed) on the blackout set of ``split``: columns model, seed, frame, mae."""
     dark = blackout_split(P, split)
     rows = []
-    for (kind, seed), model in models.items():
+    for (kind, seed), model in steps(models.items(), "blackout curves", len(models)):
         mean, _ = _mc_mean(P, model, dark, seed)
         for frame, err in enumerate(abs_error_per_frame(mean, dark["targets"])):
             rows.append({"model": kind, "seed": seed, "frame": frame, "mae": float(err)})
@@ -91,22 +92,38 @@ def physics_bound(P, no_dynamics: dict[int, Any], levels, n_particles: int = 100
     sets = {float(level): studies.pendulum_split(P, "test", level) for level in levels}
     sets["blackout"] = blackout_split(P, "test")
     rows, curve_rows = [], []
-    for seed, model in no_dynamics.items():
-        mean, sigma = _mc_mean(P, model, val, seed)
-        cal = oracle.calibrate_particle_filter(mean, sigma, val["targets"], n_particles=min(n_particles, 200),
-                                               seed=seed)
-        for name, arrays in sets.items():
-            mean, sigma = _mc_mean(P, model, arrays, seed)
-            est = oracle.pendulum_particle_filter(mean, sigma, n_particles=n_particles, seed=seed,
-                                                  sigma_scale=cal["sigma_scale"], outlier=cal["outlier"])
-            per_frame = abs_error_per_frame(est, arrays["targets"])
-            rows.append({"seed": seed, "noise": name, "mae_input": float(abs_error_per_frame(mean, arrays["targets"]).mean()),
-                         "mae": float(per_frame.mean()), "sigma_scale": cal["sigma_scale"], "outlier": cal["outlier"],
-                         "n_particles": n_particles})
-            if name == "blackout":
-                curve_rows += [{"model": "physics_bound", "seed": seed, "frame": f, "mae": float(e)}
-                               for f, e in enumerate(per_frame)]
-    return pd.DataFrame(rows), pd.DataFrame(curve_rows)
+    for seed, model in steps(no_dynamics.items(), "true-physics bound (per no_dynamics seed)", len(no_dynamics)):
+        table, curves = bound_on(lambda arrays: _mc_mean(P, model, arrays, seed), val, sets, n_particles, seed)
+        rows.append(table.assign(seed=seed))
+        curve_rows.append(curves.assign(seed=seed))
+    order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "n_particles"]
+    return (pd.concat(rows, ignore_index=True)[order],
+            pd.concat(curve_rows, ignore_index=True)[["model", "seed", "frame", "mae"]])
+
+
+def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.ndarray]], n_particles: int,
+             seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The true-physics particle filter on one encoder's per-frame estimates.
+
+    predict(arrays) -> (mean, sigma), each (N, T, 2): the per-frame model (no_dynamics). Its
+    likelihood scale and outlier weight are chosen on ``val`` (at the training noise) only;
+    then every set of ``sets`` (name -> split arrays) is filtered. Returns (table: noise,
+    mae_input, mae, sigma_scale, outlier, n_particles; curves: MAE per frame of the 'blackout'
+    set, model = 'physics_bound')."""
+    mean, sigma = predict(val)
+    cal = oracle.calibrate_particle_filter(mean, sigma, val["targets"], n_particles=min(n_particles, 200), seed=seed)
+    rows, curve_rows = [], []
+    for name, arrays in sets.items():
+        mean, sigma = predict(arrays)
+        est = oracle.pendulum_particle_filter(mean, sigma, n_particles=n_particles, seed=seed,
+                                              sigma_scale=cal["sigma_scale"], outlier=cal["outlier"])
+        per_frame = abs_error_per_frame(est, arrays["targets"])
+        rows.append({"noise": name, "mae_input": float(abs_error_per_frame(mean, arrays["targets"]).mean()),
+                     "mae": float(per_frame.mean()), "sigma_scale": cal["sigma_scale"], "outlier": cal["outlier"],
+                     "n_particles": n_particles})
+        if name == "blackout":
+            curve_rows += [{"model": "physics_bound", "frame": f, "mae": float(e)} for f, e in enumerate(per_frame)]
+    return pd.DataFrame(rows), pd.DataFrame(curve_rows, columns=["model", "frame", "mae"])
 
 
 def pixel_reference(P, levels, n_angles: int = 4096) -> pd.DataFrame:

@@ -17,6 +17,7 @@ import torch
 from drfkit import metrics
 from drfkit.paths import predictions_dir
 from drfkit.predictions import cached_predict_rates
+from drfkit.progress import steps
 from drfkit.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
@@ -142,7 +143,8 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     models = models if models is not None else studies.trained_models(P, study)
     device = studies.pick_device(P.device)
     rows = []
-    for noise in noise_levels:
+    noise_levels = list(noise_levels)
+    for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
         data = studies.study_data(P, study, "test", noise)
         for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
             results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
@@ -164,7 +166,8 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
     models = models if models is not None else studies.trained_models(P, study)
     device = studies.pick_device(P.device)
     rows = []
-    for noise in noise_levels:
+    noise_levels = list(noise_levels)
+    for noise in steps(noise_levels, f"{study}: calibration at {len(noise_levels)} test levels"):
         data = studies.study_data(P, study, "test", noise)
         mask = None
         if data.mask is not None:

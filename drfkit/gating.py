@@ -48,6 +48,7 @@ import torch
 from drfkit import registry
 from drfkit.evaluate import prediction_metrics
 from drfkit.models.parts import check_dropout_p, check_n_samples
+from drfkit.progress import steps
 from drfkit.timing import interleaved_times
 from drfkit.uncertainty import as_model_input, summarise_samples
 
@@ -558,7 +559,7 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     val_level = level_ if val_noise is None else float(val_noise)
     val, test = studies.study_data(P, study, "val", val_level), studies.study_data(P, study, "test", level_)
     tables, sweeps, vals = [], [], []
-    for seed, model in sorted(drf.items()):
+    for seed, model in steps(sorted(drf.items()), f"{study}: gating per DRF seed"):
         model = model.to(device)
         gate, val_table = fit_gate(model, val, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
                                    n_points=P.gating_sweep_points, level=P.interval_level, seed=seed,

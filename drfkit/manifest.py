@@ -119,3 +119,56 @@ class NotebookTimer:
         record_notebook(self.profile, self.notebook, finished=now_iso(), duration_s=round(duration, 2),
                         status="ok", **extra)
         return duration
+
+
+def cell_times(executed_notebook) -> list[dict[str, Any]]:
+    """Seconds of every code cell of a notebook executed by papermill (its ``papermill.duration``
+    cell metadata), with the cell's first line of code (comments skipped) to name it."""
+    import nbformat
+
+    nb = nbformat.read(str(executed_notebook), as_version=4)
+    rows = []
+    for index, cell in enumerate(nb.cells):
+        seconds = cell.metadata.get("papermill", {}).get("duration")
+        if cell.cell_type != "code" or seconds is None:
+            continue
+        code = [line for line in cell.source.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+        rows.append({"cell": index, "seconds": round(float(seconds), 2), "first_line": (code[0] if code else "")[:90]})
+    return rows
+
+
+def record_cell_times(profile: str, notebook: str, executed_notebook) -> None:
+    """Replace ``notebook``'s rows of ``results/<profile>/cell_times.csv`` (notebook, cell,
+    seconds, first_line): where a profile's time goes, cell by cell, from its last run."""
+    import pandas as pd
+
+    from drfkit.io import atomic_write_csv
+
+    path = results_dir(profile) / "cell_times.csv"
+    new = pd.DataFrame(cell_times(executed_notebook), columns=["cell", "seconds", "first_line"]).assign(notebook=notebook)
+    old = pd.read_csv(path) if path.exists() else new.iloc[:0]
+    table = pd.concat([old[old["notebook"] != notebook], new], ignore_index=True).sort_values(["notebook", "cell"])
+    atomic_write_csv(path, table[["notebook", "cell", "seconds", "first_line"]])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit.manifest --cell-times PROFILE``: rebuild ``cell_times.csv`` from the
+    executed notebooks of a profile (the pipeline writes it after each notebook)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("--cell-times", metavar="PROFILE", required=True)
+    args = parser.parse_args(argv)
+    executed = sorted(results_dir(args.cell_times, "executed").glob("[0-9]*.ipynb"))
+    executed = [p for p in executed if not p.name.endswith(".failed.ipynb")]
+    if not executed:
+        print(f"no executed notebooks under results/{args.cell_times}/executed/; run the pipeline first")
+        return 1
+    for path in executed:
+        record_cell_times(args.cell_times, path.stem, path)
+    print(f"wrote results/{args.cell_times}/cell_times.csv from {len(executed)} notebooks")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -90,6 +90,14 @@ SPECS: dict[str, Spec] = {
                               lambda v: len(v) > 0 and set(v) <= set(VARIANTS)),
     "ablation_seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
                            lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0),
+    "regime_train_noise": Spec("list[float]", "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
+                               lambda v: 0.5 in v and all(map(_in01, v)) and len(set(v)) == len(v),
+                               "max noise levels the noise-regime map trains at (drfkit.regime; 0.5 is the "
+                               "book's own protocol, others are drfkit.protocols.regime_variant)"),
+    "regime_seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
+                         lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0),
+    "regime_test_sequences": Spec("int", "an integer >= 1", lambda v: v >= 1,
+                                  "sequences of the regime map's own test split (at every sweep level)"),
     # -- pedestrian data ---------------------------------------------------------------------
     "ped_source": Spec("str", "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
     "nuscenes_root": Spec("str", "'' (none) or a folder holding <nuscenes_version>/sample.json ..."),
@@ -104,7 +112,7 @@ SPECS: dict[str, Spec] = {
                         lambda v: len(v) > 0 and all(map(_in01, v))),
     "ped_seq_len": Spec("int", "an integer >= 1", lambda v: v >= 1),
     "ped_data_seed": Spec("int", "an integer >= 0", lambda v: v >= 0),
-    "sim_detector": Spec("dict", "a mapping of DetectorConfig fields (see drfkit.data.pedestrians)"),
+    "sim_detector": Spec("dict", "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)"),
     # -- pedestrian training ----------------------------------------------------------------
     "ped_models": Spec("list[str]", f"a non-empty subset of {list(PED_MODELS)}",
                        lambda v: len(v) > 0 and set(v) <= set(PED_MODELS)),
@@ -143,7 +151,8 @@ _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
                "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
-_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds"]
+_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "regime_train_noise",
+             "regime_seeds", "regime_test_sequences"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",
              "ped_data_seed", "sim_detector"]
@@ -243,7 +252,7 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
             if key in out and not Path(out[key]).is_dir():
                 raise ParameterError(f"{where}: parameter '{key}' = {out[key]!r} is not a folder on this machine")
     if "sim_detector" in out:
-        from drfkit.data.pedestrians import DetectorConfig
+        from drfkit.data.sim_detector import DetectorConfig
 
         try:
             DetectorConfig.from_dict(out["sim_detector"])

@@ -8,7 +8,8 @@ duration and the total.
 A notebook's outputs are all or nothing: if it fails or is stopped (Ctrl-C, SIGTERM, SIGHUP), every
 output file it changed is put back as it was before it started (checkpoints and data caches
 excepted: they are written atomically and resume), its kernel and children are stopped, and the
-manifest says ``interrupted in <notebook>`` or ``failed in <notebook>``. Rerunning the same
+manifest says ``interrupted in <notebook>`` or ``failed in <notebook>``. ``cell_times.csv`` holds
+the seconds of every cell of the last run of each notebook. Rerunning the same
 command after that skips the notebooks that finished with the same parameters and code.
 
 ``--jobs N`` (N > 1, ``make reproduce JOBS=N``) or ``--scheduler ADDRESS`` first trains the missing
@@ -26,9 +27,10 @@ import time
 from pathlib import Path
 
 from drfkit.io import atomic_write_bytes, param_hash
-from drfkit.manifest import now_iso, read_manifest, record_notebook, update_manifest
+from drfkit.manifest import now_iso, read_manifest, record_cell_times, record_notebook, update_manifest
 from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
 from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
+from drfkit.progress import Echo
 
 # What a notebook run may leave half-rewritten: everything under results/<profile>/ except the
 # checkpoints (written atomically per epoch and resumable), the data caches (hashed by their
@@ -151,12 +153,14 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
             before = snapshot_outputs(root)
             try:
                 # papermill rewrites its output after every cell: run into a partial file and move it
-                # into place when done, so a killed run never leaves a half-executed notebook behind
-                pm.execute_notebook(
-                    str(notebook_path(name)), str(partial),
-                    parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
-                    cwd=str(NOTEBOOKS_DIR), log_output=False,
-                )
+                # into place when done, so a killed run never leaves a half-executed notebook behind;
+                # the long evaluations inside report to the terminal through drfkit.progress
+                with Echo(out_dir / f".{name}.progress.log"):
+                    pm.execute_notebook(
+                        str(notebook_path(name)), str(partial),
+                        parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
+                        cwd=str(NOTEBOOKS_DIR), log_output=False,
+                    )
             except (KeyboardInterrupt, Interrupted) as exc:
                 _stop_descendants()
                 partial.unlink(missing_ok=True)
@@ -180,6 +184,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                       f"{failed}; the other outputs are as they were before it started\n{exc}", file=sys.stderr)
                 return 1
             os.replace(partial, final)
+            record_cell_times(profile_name, name, final)
             (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
             durations[name] = round(time.perf_counter() - t, 1)
             finished[name] = {"params": params_key, "code": code, "at": now_iso()}

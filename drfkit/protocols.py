@@ -39,6 +39,25 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "lstm_book": {"kind": "lstm", "model": {"noise_head": "log"}, "blackouts": BLACKOUT_TRAINING},
 }
 
+# The noise-regime map (``drfkit.regime``): the book's protocol of each model kind, trained at
+# other max noise levels than the paper's 0.5. ``regime_variant`` names them.
+REGIME_BASES = {"drf": "book", "no_dynamics": "no_dynamics_book", "lstm": "lstm_book"}
+REGIME_TRAIN_NOISE = (0.75, 1.0)
+
+
+def regime_variant(kind: str, train_noise: float) -> str:
+    """The variant of the book's protocol for ``kind`` trained at max noise ``train_noise``
+    (``book`` itself at 0.5, ``book_train0.75`` at 0.75)."""
+    if kind not in REGIME_BASES:
+        raise ValueError(f"the regime map trains {sorted(REGIME_BASES)}, not {kind!r}")
+    base = REGIME_BASES[kind]
+    return base if train_noise == 0.5 else f"{base}_train{train_noise:g}"
+
+
+for _kind, _base in REGIME_BASES.items():
+    for _level in REGIME_TRAIN_NOISE:
+        VARIANTS[regime_variant(_kind, _level)] = VARIANTS[_base] | {"train_max_noise": _level}
+
 # The ablation's budgets (``drfkit.ablation``); data from the profiles' pend_data_seed.
 ABLATION_BUDGETS: dict[str, dict[str, Any]] = {
     # 480 Adam steps: 5-12 minutes per run on one CPU thread (two runs side by side on 2 cores)

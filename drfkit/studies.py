@@ -63,7 +63,8 @@ def _pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
 # ------------------------------------------------------------------------- pedestrians
 def pedestrian_records(P, noise_p: float) -> dict[str, Any]:
     """Per-detection records at salt-and-pepper probability ``noise_p`` (all splits)."""
-    from drfkit.data.pedestrians import DetectorConfig, load_pedestrians
+    from drfkit.data.pedestrians import load_pedestrians
+    from drfkit.data.sim_detector import DetectorConfig
 
     return load_pedestrians(
         data_dir(P.profile), P.ped_source, noise_p, n_scenes=P.ped_n_scenes,

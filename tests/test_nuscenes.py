@@ -42,7 +42,9 @@ from drfkit.data.nuscenes import (
     read_tables,
     write_noisy_images,
 )
-from drfkit.data.pedestrians import load_pedestrians, simulate_records, simulate_truth
+from drfkit.data.pedestrians import load_pedestrians
+from drfkit.data.sim_detector import simulate_records
+from drfkit.data.sim_world import simulate_truth
 from drfkit.data.records import RECORD_FIELDS, check_records
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,20 +1,11 @@
-"""Simulated pedestrians and the shared record format (drfkit.data.pedestrians, drfkit.data.records)."""
+"""Simulated pedestrians and the shared record format (drfkit.data.sim_world, sim_detector, drawing, pedestrians, records)."""
 import numpy as np
 import pytest
 
-from drfkit.data.pedestrians import (
-    CAM_FRONT_INTRINSICS,
-    IMAGE_HEIGHT,
-    IMAGE_WIDTH,
-    DetectorConfig,
-    detect,
-    draw_skeletons,
-    load_pedestrians,
-    render_frame,
-    simulate_records,
-    simulate_truth,
-)
-from drfkit.data.pedestrians import _background
+from drfkit.data.drawing import _background, draw_skeletons, render_frame
+from drfkit.data.pedestrians import load_pedestrians
+from drfkit.data.sim_detector import DetectorConfig, detect, simulate_records
+from drfkit.data.sim_world import CAM_FRONT_INTRINSICS, IMAGE_HEIGHT, IMAGE_WIDTH, simulate_truth
 from drfkit.data.records import (
     RECORD_FIELDS,
     check_records,

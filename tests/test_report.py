@@ -131,3 +131,17 @@ def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path)
     text = "\n".join(dynamics_lines(tmp_path))
     assert "budget small" in text and "| book | DRF (ours) | 2 | 0.02 |" in text
     assert text.index("| book | DRF (ours) | 2") < text.index("| paper | DRF (ours) | 1")
+
+
+def test_dynamics_lines_show_the_regime_map(tmp_path):
+    from drfkit.regime import regime_summary
+    from drfkit.report import dynamics_lines
+
+    rows = [{"train_noise": tn, "model": m, "seed": 0, "test": "0.75", "test_noise": 0.75, "mae": mae}
+            for tn, m, mae in [(0.5, "drf", 0.04), (0.5, "lstm", 0.05), (0.5, "no_dynamics", 0.08),
+                               (0.5, "physics_bound", 0.02), (1.0, "drf", 0.03), (1.0, "lstm", 0.03),
+                               (1.0, "no_dynamics", 0.06), (1.0, "physics_bound", 0.015)]]
+    regime_summary(pd.DataFrame(rows)).to_csv(tmp_path / "pendulum_regime_summary.csv", index=False)
+    text = "\n".join(dynamics_lines(tmp_path))
+    assert "| 0.5 | 0.75 | 0.0400 | 0.0500 | 0.0800 | 0.0200 | 0.50 | 2.00 |" in text
+    assert "| 1 | 0.75 | 0.0300 | 0.0300 | 0.0600 | 0.0150 | 0.50 | 2.00 |" in text

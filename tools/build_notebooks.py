@@ -4,15 +4,13 @@ The sources are plain Python (reviewable diffs); the .ipynb files are what paper
 nbval run. ``--execute`` runs each notebook with its defaults (the quick profile) and
 stores the outputs, which strict nbval then compares against.
 
-Cell syntax: ``# %%`` starts a code cell, ``# %% [markdown]`` a markdown cell (lines
-lose their leading ``# ``), ``# %% tags=["..."]`` adds tags. The body of the cell tagged
+The sources are jupytext's percent format (``# %%`` a code cell, ``# %% [markdown]`` a
+markdown cell, ``# %% tags=["..."]`` tags), read by jupytext. The body of the cell tagged
 ``parameters`` is generated from ``params/quick.yaml`` (one place for the defaults).
 """
 from __future__ import annotations
 
 import argparse
-import json
-import re
 import sys
 from pathlib import Path
 
@@ -20,7 +18,6 @@ import nbformat
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC, OUT = ROOT / "notebooks" / "src", ROOT / "notebooks"
-HEADER = re.compile(r"^# %%(?P<md> \[markdown\])?(?: tags=(?P<tags>\[.*\]))?\s*$")
 
 
 def parameters_cell(notebook: str) -> str:
@@ -36,31 +33,19 @@ def parameters_cell(notebook: str) -> str:
 
 
 def parse(text: str, notebook: str) -> nbformat.NotebookNode:
-    nb = nbformat.v4.new_notebook()
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    nb.metadata["language_info"] = {"name": "python"}
-    cells: list[tuple[bool, list[str], list[str]]] = []
-    for line in text.splitlines():
-        m = HEADER.match(line)
-        if m:
-            cells.append((bool(m["md"]), json.loads(m["tags"]) if m["tags"] else [], []))
-        elif cells:
-            cells[-1][2].append(line)
-    for is_md, tags, lines in cells:
-        while lines and not lines[-1].strip():
-            lines.pop()
-        if is_md:
-            src = "\n".join(l[2:] if l.startswith("# ") else l.lstrip("#") for l in lines)
-            cell = nbformat.v4.new_markdown_cell(src)
-        elif "parameters" in tags:
-            cell = nbformat.v4.new_code_cell(parameters_cell(notebook))
-        else:
-            cell = nbformat.v4.new_code_cell("\n".join(lines))
-        if tags:
-            cell.metadata["tags"] = tags
-        nb.cells.append(cell)
-    for i, cell in enumerate(nb.cells):  # stable ids keep diffs small
-        cell["id"] = f"cell-{i:02d}"
+    """The notebook of a percent-format source (read by jupytext), its parameters cell filled in."""
+    import jupytext
+
+    nb = jupytext.reads(text, fmt="py:percent")
+    nb.metadata = nbformat.NotebookNode(
+        kernelspec={"name": "python3", "display_name": "Python 3", "language": "python"},
+        language_info={"name": "python"})
+    for i, cell in enumerate(nb.cells):
+        tags = cell.metadata.get("tags", [])
+        cell.metadata = nbformat.NotebookNode({"tags": tags} if tags else {})  # not jupytext's layout hints
+        if "parameters" in tags:
+            cell.source = parameters_cell(notebook)
+        cell["id"] = f"cell-{i:02d}"  # stable ids keep diffs small
     return nb
 
 

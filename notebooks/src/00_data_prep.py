@@ -103,7 +103,7 @@ plt.show()
 # from. Records at different noise levels hold the same pedestrians.
 
 # %%
-from drfkit.data.pedestrians import draw_skeletons, render_frame
+from drfkit.data.drawing import draw_skeletons, render_frame
 
 records = {p: studies.pedestrian_records(P, p) for p in sorted({0.0, P.ped_train_p, *P.ped_eval_p})}
 base = records[P.ped_train_p]

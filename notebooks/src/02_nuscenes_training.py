@@ -25,7 +25,7 @@
 #   weighs the two slightly differently. The comparison between models is unaffected.
 #
 # Unless `ped_source = "nuscenes"`, the records come from the simulated nuScenes-like source
-# (`drfkit.data.pedestrians`): its keypoint detector **stands in for PifPaf on noisy images**,
+# (`drfkit.data.sim_detector`): its keypoint detector **stands in for PifPaf on noisy images**,
 # so absolute errors are not comparable with the paper's; the comparison between models is.
 
 # %% tags=["parameters"]

@@ -15,6 +15,10 @@
 # It then redraws each of the paper's result figures from our numbers with the paper's published
 # values beside them, and turns claims C1–C5 into computed verdicts (`drfkit.claims`).
 # No threshold or model choice here looks at the test sets: models were selected on validation NLL.
+# The pendulum is evaluated under every training protocol of `pend_protocols` (`drfkit.protocols`:
+# the paper's as written, and the book's, under which the DRF's filter is checked to filter in
+# notebook 01); C1, C2 and C5 get a verdict per protocol. The book's protocol changes the pendulum
+# only, so the pedestrians are one set of models, judged once (protocol `paper`).
 # `eval_studies` names the studies evaluated (both by default); a study left out — for instance
 # while its paper-scale training is still running — has its claims listed as not evaluated.
 
@@ -36,21 +40,36 @@ from drfkit.report import plot_calibration, plot_mae_bars, plot_picp_mpiw, plot_
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-models = {study: studies.trained_models(P, study) for study in P.eval_studies}
+PROTOCOLS = {"pendulum": list(P.pend_protocols), "pedestrians": ["paper"]}
+groups = [(s, protocol) for s in P.eval_studies for protocol in PROTOCOLS[s]]  # (study, protocol)
+models = {g: studies.trained_models(P, g[0], protocol=g[1]) for g in groups}
 levels = {"pendulum": sorted(set(P.pend_eval_max_noise) | set(P.pend_sweep_max_noise)),
           "pedestrians": sorted(set(P.ped_eval_p) | set(P.ped_sweep_p))}
 paper_noise = {"pendulum": P.pend_eval_max_noise, "pedestrians": P.ped_eval_p}
-evals = pd.concat([evaluate_study(P, s, levels[s], models=models[s]) for s in models], ignore_index=True)
+evals = pd.concat([evaluate_study(P, s, levels[s], models=models[(s, pr)]).assign(protocol=pr) for s, pr in groups],
+                  ignore_index=True)
 save_table(P.profile, "ood_all_metrics_by_seed", evals)
-summary = summarise(evals, ["study", "model", "noise"])
+summary = summarise(evals, ["study", "protocol", "model", "noise"])
 save_table(P.profile, "ood_all_metrics", summary)
 
+
+def part(frame: pd.DataFrame, group: tuple[str, str]) -> pd.DataFrame:
+    """The rows of one (study, protocol)."""
+    return frame[frame["study"].eq(group[0]) & frame["protocol"].eq(group[1])]
+
+
+def figure_name(group: tuple[str, str], what: str) -> str:
+    """The paper protocol's figures keep their names; another protocol's carry it."""
+    study, protocol = group
+    return f"{study}_{what}" if protocol == "paper" else f"{study}_{protocol}_{what}"
+
 # %%
-expected_rows = sum(len(levels[s]) * len(models[s]) for s in models)
+expected_rows = sum(len(levels[s]) * len(models[(s, pr)]) for s, pr in groups)
 assert len(evals) == expected_rows, (len(evals), expected_rows)
 assert evals[["mae", "picp", "mpiw", "nll", "crps", "cal_error"]].notna().all().all()
 assert ((evals["picp"] >= 0) & (evals["picp"] <= 1)).all() and (evals["mpiw"] > 0).all()
-print(f"evaluated {len(evals)} (model, seed, noise) combinations on {' and '.join(models)}")
+print(f"evaluated {len(evals)} (model, seed, noise) combinations on "
+      + ", ".join(f"{s} ({pr} protocol)" for s, pr in groups))
 
 # %% [markdown]
 # ## All metrics at the paper's noise levels
@@ -59,13 +78,13 @@ print(f"evaluated {len(evals)} (model, seed, noise) combinations on {' and '.joi
 # NBVAL_IGNORE_OUTPUT
 paper_levels = (summary["study"].eq("pendulum") & summary["noise"].isin(P.pend_eval_max_noise)) | \
                (summary["study"].eq("pedestrians") & summary["noise"].isin(P.ped_eval_p))
-cols = ["study", "model", "noise", "n_seeds", "mae", "mae_ci", "picp", "mpiw", "nll", "crps", "cal_error"]
+cols = ["study", "protocol", "model", "noise", "n_seeds", "mae", "mae_ci", "picp", "mpiw", "nll", "crps", "cal_error"]
 summary.loc[paper_levels, cols].round(4)
 
 # %% [markdown]
 # ## The paper's figures, redrawn
 # Pendulum MAE (paper Fig. 3 middle) and pedestrian MAE with Monoloco (paper Fig. 4); black ticks
-# are the paper's values.
+# are the paper's values (of its own protocol). A pendulum figure per training protocol.
 
 # %%
 # what differs between the two studies' figures: the paper's values and the labels
@@ -75,12 +94,13 @@ FIGURES = {
     "pedestrians": {"mae": PEDESTRIAN_MAE, "picp_mpiw": PEDESTRIAN_PICP_MPIW, "per_level_paper": True,
                     "ylabel": "depth MAE (m)", "level_name": "p", "width": 7.0},
 }
-at_paper_noise = {s: summary[summary["study"].eq(s) & summary["noise"].isin(paper_noise[s])] for s in models}
-for study in models:
-    f = FIGURES[study]
-    fig = plot_mae_bars(at_paper_noise[study], studies.study_models(P, study), f["mae"], ylabel=f["ylabel"],
+at_paper_noise = {g: part(summary, g)[lambda d, s=g[0]: d["noise"].isin(paper_noise[s])] for g in groups}
+for group in groups:
+    f = FIGURES[group[0]]
+    fig = plot_mae_bars(at_paper_noise[group], studies.study_models(P, group[0]), f["mae"], ylabel=f["ylabel"],
                         level_name=f["level_name"], width=f["width"])
-    save_figure(P.profile, f"{study}_mae", fig)
+    fig.axes[0].set_title(f"{group[1]} protocol", fontsize=9)
+    save_figure(P.profile, figure_name(group, "mae"), fig)
     plt.show()
 
 # %% [markdown]
@@ -88,16 +108,18 @@ for study in models:
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-curves = {s: evaluate_study(P, s, paper_noise[s], P.dropout_rates, models=models[s]) for s in models}
-curve_summary = {s: summarise(c, ["model", "noise", "dropout_p"]) for s, c in curves.items()}
-_ = save_table(P.profile, "ood_picp_mpiw", pd.concat([c.assign(study=s) for s, c in curve_summary.items()]))
+curves = {g: evaluate_study(P, g[0], paper_noise[g[0]], P.dropout_rates, models=models[g]) for g in groups}
+curve_summary = {g: summarise(c, ["model", "noise", "dropout_p"]) for g, c in curves.items()}
+_ = save_table(P.profile, "ood_picp_mpiw", pd.concat([c.assign(study=g[0], protocol=g[1])
+                                                      for g, c in curve_summary.items()]))
 
 # %%
-for study in models:
-    f = FIGURES[study]
-    fig = plot_picp_mpiw(curve_summary[study], studies.study_models(P, study), f["picp_mpiw"],
+for group in groups:
+    f = FIGURES[group[0]]
+    fig = plot_picp_mpiw(curve_summary[group], studies.study_models(P, group[0]), f["picp_mpiw"],
                          per_level_paper=f["per_level_paper"], level_name=f["level_name"], nominal=P.interval_level)
-    save_figure(P.profile, f"{study}_picp_mpiw", fig)
+    fig.suptitle(f"{group[1]} protocol", fontsize=9)
+    save_figure(P.profile, figure_name(group, "picp_mpiw"), fig)
     plt.show()
 
 # %% [markdown]
@@ -108,50 +130,56 @@ for study in models:
 
 # %%
 train_noise = {"pendulum": (P.pend_train_max_noise, "max noise"), "pedestrians": (P.ped_train_p, "salt-and-pepper p")}
-for study in models:
-    train_level, name = train_noise[study]
-    fig = plot_sweep(summary[summary["study"] == study], studies.study_models(P, study), train_level,
+for group in groups:
+    train_level, name = train_noise[group[0]]
+    fig = plot_sweep(part(summary, group), studies.study_models(P, group[0]), train_level,
                      metrics=("mae", "picp", "nll"), xlabel=name)
-    save_figure(P.profile, f"{study}_sweep", fig)
+    fig.suptitle(f"{group[1]} protocol", fontsize=9)
+    save_figure(P.profile, figure_name(group, "sweep"), fig)
     plt.show()
 
 # %%
-calib = pd.concat([calibration_points(P, s, [min(paper_noise[s]), max(paper_noise[s])], models=models[s])
-                   for s in models])
+calib = pd.concat([calibration_points(P, g[0], [min(paper_noise[g[0]]), max(paper_noise[g[0]])], models=models[g])
+                   .assign(protocol=g[1]) for g in groups])
 save_table(P.profile, "calibration_curves", calib)
-for study in models:
-    fig = plot_calibration(calib[calib["study"] == study], studies.study_models(P, study))
-    save_figure(P.profile, f"{study}_calibration", fig)
+for group in groups:
+    fig = plot_calibration(part(calib, group), studies.study_models(P, group[0]))
+    fig.suptitle(f"{group[1]} protocol", fontsize=9)
+    save_figure(P.profile, figure_name(group, "calibration"), fig)
     plt.show()
 
 # %% [markdown]
 # ## Claims C1–C5, with computed verdicts
 # Each rule is written in the table next to its verdict (`drfkit.claims`); the timing (C6) and
 # gating (C7) rows are added by notebooks 04 and 05. C1 and C2 need the pendulum, C3 and C4 the
-# pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated.
+# pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated. C1, C2 and C5
+# are judged once per pendulum protocol (C5 with the one set of pedestrian models in each).
 
 # %%
 ood_ped = [p for p in P.ped_eval_p if p > P.ped_train_p]
 ood_pend = [m for m in P.pend_eval_max_noise if m > P.pend_train_max_noise]
-rows = []
-if "pendulum" in models:
-    rows += [claims.c1_pendulum_mae_ordering(at_paper_noise["pendulum"], P.pend_eval_max_noise),
-             claims.c2_pendulum_picp_mpiw(curve_summary["pendulum"], P.pend_eval_max_noise)]
-if "pedestrians" in models:
-    rows += [claims.c3_pedestrian_ood_gain(evals[evals["study"] == "pedestrians"], ood_ped),
-             claims.c4_in_distribution_parity(at_paper_noise["pedestrians"], P.ped_train_p)]
 shifted = {"pendulum": ood_pend, "pedestrians": ood_ped}
-rows.append(claims.c5_intervals_under_shift(
-    summary, [(s, lv) for s in models for lv in shifted[s]],
-    {"pendulum": [m for m in P.pend_models if m != "drf"],
-     "pedestrians": [m for m in P.ped_models if m != "drf"]}))
-table = claims.upsert(P.profile, rows)
-assert set(table["verdict"]) <= {claims.REPRODUCED, claims.PARTLY, claims.NOT}
-print("claims written:", ", ".join(r["id"] for r in rows))
+baselines = {"pendulum": [m for m in P.pend_models if m != "drf"], "pedestrians": [m for m in P.ped_models if m != "drf"]}
+written = []
+for protocol in PROTOCOLS["pendulum"] if "pendulum" in P.eval_studies else ["paper"]:
+    judged = [g for g in groups if g[1] == protocol or g[0] != "pendulum"]  # this pendulum protocol + pedestrians
+    rows = []
+    if ("pendulum", protocol) in judged:
+        rows += [claims.c1_pendulum_mae_ordering(at_paper_noise[("pendulum", protocol)], P.pend_eval_max_noise),
+                 claims.c2_pendulum_picp_mpiw(curve_summary[("pendulum", protocol)], P.pend_eval_max_noise)]
+    if protocol == "paper" and ("pedestrians", "paper") in judged:
+        rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", "paper")), ood_ped),
+                 claims.c4_in_distribution_parity(at_paper_noise[("pedestrians", "paper")], P.ped_train_p)]
+    shift = pd.concat([part(summary, g) for g in judged])
+    rows.append(claims.c5_intervals_under_shift(shift, [(s, lv) for s, _ in judged for lv in shifted[s]], baselines))
+    table = claims.upsert(P.profile, rows, protocol=protocol)
+    written += [f"{r['id']} ({protocol})" for r in rows]
+assert set(table["verdict"]) <= {claims.REPRODUCED, claims.PARTLY, claims.NOT, claims.NOT_TESTABLE}
+print("claims written:", ", ".join(written))
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-table[["id", "claim", "paper", "ours", "verdict"]]
+table[table["id"].str.startswith("C")][["id", "protocol", "claim", "paper", "ours", "verdict"]]
 
 # %%
 _ = timer.finish()

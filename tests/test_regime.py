@@ -1,0 +1,90 @@
+"""The noise-regime map: its variants are the book's protocol at another training noise, its rows
+are computed once on a test split of their own, and its summary is what the rows say."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from drfkit import ablation, regime
+from drfkit.protocols import REGIME_BASES, REGIME_TRAIN_NOISE, VARIANTS, regime_variant, variant_spec
+
+LEVELS = [0.0, 0.5, 1.0]
+
+
+def test_regime_variants_are_the_book_protocol_at_another_noise():
+    for kind, base in REGIME_BASES.items():
+        assert regime_variant(kind, 0.5) == base and VARIANTS[base]["kind"] == kind
+        for level in REGIME_TRAIN_NOISE:
+            spec, book = variant_spec(regime_variant(kind, level)), variant_spec(base)
+            assert spec["train_max_noise"] == level and book["train_max_noise"] == 0.5
+            assert {k: v for k, v in spec.items() if k != "train_max_noise"} == \
+                   {k: v for k, v in book.items() if k != "train_max_noise"}
+    with pytest.raises(ValueError, match="regime map trains"):
+        regime_variant("monoloco", 0.5)
+
+
+@pytest.fixture(scope="module")
+def tiny_map(tmp_path_factory):
+    out = tmp_path_factory.mktemp("regime")
+    table = regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
+    return out, table
+
+
+def test_map_has_every_model_level_and_the_blackout(tiny_map):
+    _, table = tiny_map
+    assert set(table["model"]) == set(REGIME_BASES) | {"physics_bound"}
+    for _, rows in table.groupby("model"):
+        assert sorted(rows["test"]) == sorted([f"{lv:g}" for lv in LEVELS] + ["blackout", "after_blackout"])
+    assert table["mae"].between(0, 2).all()
+    assert table.loc[table["test"].str.contains("blackout"), "test_noise"].isna().all()
+
+
+def test_rows_are_cached_and_recomputed_when_a_setting_changes(tiny_map, monkeypatch):
+    out, table = tiny_map
+    files = sorted((out / "tiny" / "regime").glob("*.json"))
+    assert len(files) == len(REGIME_BASES) + 1
+    assert list((out / "data").glob("pendulum-regime-test-*.npz"))  # its own test split, beside the ablation's
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a cached regime row was trained again")
+
+    monkeypatch.setattr(ablation, "train_variant", no_training)
+    again = regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
+    assert again.equals(table)
+    with pytest.raises(AssertionError, match="trained again"):  # another test size needs the models
+        regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=2, n_samples=4, n_particles=30)
+
+
+def test_the_test_split_is_not_the_validation_split(tiny_map):
+    out, _ = tiny_map
+    test = regime._test_sets(out, ablation.BUDGETS["tiny"], [0.5], 3)[0.5]
+    val = ablation._split(ablation.data_dir(out), ablation.BUDGETS["tiny"], "val", 0.5)
+    assert not np.allclose(test["targets"][:, 0], val["targets"][:3, 0])
+
+
+def test_summary_ratios_follow_the_rows(tiny_map):
+    _, table = tiny_map
+    summary = regime.regime_summary(table).set_index(["train_noise", "test"])
+    row = summary.loc[(0.5, "0.5")]
+    mae = table[(table["test"] == "0.5")].set_index("model")["mae"]
+    assert row["drf_over_no_dynamics"] == pytest.approx(mae["drf"] / mae["no_dynamics"])
+    assert row["drf_over_bound"] == pytest.approx(mae["drf"] / mae["physics_bound"])
+
+
+def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from drfkit.report import plot_regime
+
+    _, table = tiny_map
+    fig = plot_regime(table, list(REGIME_BASES))
+    assert len(fig.axes) == 2
+
+
+def test_bound_row_records_its_calibration(tiny_map):
+    out, _ = tiny_map
+    row = json.loads((out / "tiny" / "regime" / "physics_bound-train0.5-seed0.json").read_text())
+    assert row["sigma_scale"] > 0 and 0 <= row["outlier"] < 1 and row["n_particles"] == 30
