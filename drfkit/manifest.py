@@ -145,7 +145,12 @@ def record_cell_times(profile: str, notebook: str, executed_notebook) -> None:
     from drfkit.io import atomic_write_csv
 
     path = results_dir(profile) / "cell_times.csv"
-    new = pd.DataFrame(cell_times(executed_notebook), columns=["cell", "seconds", "first_line"]).assign(notebook=notebook)
+    try:
+        rows = cell_times(executed_notebook)
+    except Exception as exc:  # a record of times must never fail the run it describes
+        print(f"note: no cell times for {notebook} ({type(exc).__name__}: {exc})")
+        return
+    new = pd.DataFrame(rows, columns=["cell", "seconds", "first_line"]).assign(notebook=notebook)
     old = pd.read_csv(path) if path.exists() else new.iloc[:0]
     table = pd.concat([old[old["notebook"] != notebook], new], ignore_index=True).sort_values(["notebook", "cell"])
     atomic_write_csv(path, table[["notebook", "cell", "seconds", "first_line"]])

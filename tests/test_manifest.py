@@ -38,3 +38,30 @@ def test_start_notebook_validates_and_records(results):
     assert params.n_samples == quick["n_samples"]
     entry = read_manifest("nb")["notebooks"]["04_timing"]
     assert entry["params"]["seeds"] == quick["seeds"]
+
+
+def test_cell_times_name_cells_by_code_and_replace_a_notebooks_rows(tmp_path, monkeypatch):
+    import nbformat
+    import pandas as pd
+
+    from drfkit.manifest import cell_times, record_cell_times
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_markdown_cell("# title"),
+                nbformat.v4.new_code_cell("# NBVAL_IGNORE_OUTPUT\nx = slow()\n"),
+                nbformat.v4.new_code_cell("y = 1")]
+    nb.cells[1].metadata["papermill"] = {"duration": 12.345}
+    nb.cells[2].metadata["papermill"] = {"duration": 0.01}
+    path = tmp_path / "nb.ipynb"
+    nbformat.write(nb, path)
+    assert cell_times(path) == [{"cell": 1, "seconds": 12.35, "first_line": "x = slow()"},
+                                {"cell": 2, "seconds": 0.01, "first_line": "y = 1"}]
+    record_cell_times("p", "01_a", path)
+    record_cell_times("p", "02_b", path)
+    record_cell_times("p", "01_a", path)           # a rerun replaces its own rows only
+    table = pd.read_csv(tmp_path / "p" / "cell_times.csv")
+    assert table.groupby("notebook").size().to_dict() == {"01_a": 2, "02_b": 2}
+    (tmp_path / "bad.ipynb").write_text("{}")
+    record_cell_times("p", "03_c", tmp_path / "bad.ipynb")  # unreadable: no rows, no error
+    assert set(pd.read_csv(tmp_path / "p" / "cell_times.csv")["notebook"]) == {"01_a", "02_b"}
