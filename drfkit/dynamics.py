@@ -251,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     import argparse
 
-    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.params import ParameterError, for_notebook, load_profile
     from drfkit.protocols import PROTOCOLS
     from drfkit.runtime import setup
     from drfkit.train import load_checkpoint, load_latest
@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
     try:
-        P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(args.profile)))
+        P = for_notebook("01_pendulum_training", load_profile(args.profile))
     except ParameterError as exc:
         print(f"parameter error: {exc}")
         return 2

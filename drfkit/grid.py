@@ -56,9 +56,9 @@ def study_params(S, values: dict[str, Any], study: str):
 
 
 def notebook_values(values: dict[str, Any], notebook: str):
-    from drfkit.params import notebook_params, validate
+    from drfkit.params import for_notebook
 
-    return validate(notebook, notebook_params(notebook, values))
+    return for_notebook(notebook, values)
 
 
 def study_protocols(P, study: str) -> list[str]:

@@ -322,3 +322,9 @@ def notebook_params(notebook: str, profile_values: dict[str, Any]) -> dict[str, 
         raise ParameterError(f"profile lacks parameter(s) {missing} needed by notebook {notebook}")
     validate(notebook, subset)
     return subset
+
+
+def for_notebook(notebook: str, values: dict[str, Any]) -> Params:
+    """The validated parameters of ``notebook`` from a whole profile's values (``load_profile``,
+    overrides merged): what the command-line tools use to run as that notebook would."""
+    return validate(notebook, notebook_params(notebook, values))

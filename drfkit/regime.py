@@ -171,14 +171,14 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.params import ParameterError, for_notebook, load_profile
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
     try:
-        P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(args.profile)))
+        P = for_notebook("01_pendulum_training", load_profile(args.profile))
     except ParameterError as exc:
         print(f"parameter error: {exc}")
         return 2

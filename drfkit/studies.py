@@ -236,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     from drfkit.io import CorruptArtefactError, LockedError
-    from drfkit.params import ParameterError, load_profile, notebook_params, parse_overrides, validate
+    from drfkit.params import ParameterError, for_notebook, load_profile, parse_overrides
     from drfkit.train import ResumeMismatchError
     from drfkit.runtime import setup
 
@@ -269,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     notebook = TRAINING_NOTEBOOK[args.study]
     try:
         values = load_profile(args.profile) | parse_overrides(args.set)
-        P = validate(notebook, notebook_params(notebook, values))
+        P = for_notebook(notebook, values)
         unknown = sorted(set(args.models or []) - set(study_models(P, args.study)))
         if unknown:
             raise ParameterError(f"--models {unknown} are not models of the {args.study} study in this "

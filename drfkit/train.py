@@ -149,32 +149,37 @@ def _epoch_order(n: int, seed: int, epoch: int) -> torch.Tensor:
 @torch.no_grad()
 def evaluate_loss(model, data: SequenceData, batch_size: int, device: torch.device) -> float:
     """Mean loss over ``data`` in eval mode (dropout off), weighted by batch frames."""
-    model.eval()
-    total, weight = 0.0, 0
-    for start in range(0, len(data), batch_size):
-        idx = torch.arange(start, min(start + batch_size, len(data)))
-        inputs, targets, mask = data.batch(idx, device)
+    def loss(inputs, targets, mask):
         mean, sigma = model(inputs)
         w = int(mask.sum()) if mask is not None else targets.shape[0] * targets.shape[1]
-        total += float(model.loss(mean, sigma, targets, mask)) * w
-        weight += w
-    return total / max(weight, 1)
+        return float(model.loss(mean, sigma, targets, mask)) * w, w
+
+    return _batch_mean(model, data, batch_size, device, loss)
 
 
 @torch.no_grad()
 def evaluate_l1(model, data: SequenceData, batch_size: int, device: torch.device) -> float:
     """Mean |mean - target| over the valid values of ``data`` in eval mode (dropout off):
     Monoloco's epoch selection (validation L1 of mu)."""
+    def l1(inputs, targets, mask):
+        err = (model(inputs)[0] - targets).abs()  # (B, T, out)
+        if mask is not None:
+            err = err[mask]
+        return float(err.sum()), err.numel()
+
+    return _batch_mean(model, data, batch_size, device, l1)
+
+
+def _batch_mean(model, data: SequenceData, batch_size: int, device: torch.device, score) -> float:
+    """sum(score) / sum(weight) over the batches of ``data`` in eval mode; score(inputs, targets,
+    mask) -> (sum, weight) of one batch."""
     model.eval()
     total, weight = 0.0, 0
     for start in range(0, len(data), batch_size):
         idx = torch.arange(start, min(start + batch_size, len(data)))
-        inputs, targets, mask = data.batch(idx, device)
-        err = (model(inputs)[0] - targets).abs()  # (B, T, out)
-        if mask is not None:
-            err = err[mask]
-        total += float(err.sum())
-        weight += err.numel()
+        part, w = score(*data.batch(idx, device))
+        total += part
+        weight += w
     return total / max(weight, 1)
 
 

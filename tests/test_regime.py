@@ -88,3 +88,8 @@ def test_bound_row_records_its_calibration(tiny_map):
     out, _ = tiny_map
     row = json.loads((out / "tiny" / "regime" / "physics_bound-train0.5-seed0.json").read_text())
     assert row["sigma_scale"] > 0 and 0 <= row["outlier"] < 1 and row["n_particles"] == 30
+
+
+def test_the_command_names_a_bad_profile(capsys):
+    assert regime.main(["--profile", "no-such-profile"]) == 2
+    assert "does not exist" in capsys.readouterr().out
