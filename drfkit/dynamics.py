@@ -251,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     import argparse
 
-    from drfkit.params import ParameterError, for_notebook, load_profile
+    from drfkit.params import for_command
     from drfkit.protocols import PROTOCOLS
     from drfkit.runtime import setup
     from drfkit.train import load_checkpoint, load_latest
@@ -266,10 +266,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
-    try:
-        P = for_notebook("01_pendulum_training", load_profile(args.profile))
-    except ParameterError as exc:
-        print(f"parameter error: {exc}")
+    P = for_command("01_pendulum_training", args.profile)
+    if P is None:
         return 2
     setup(args.threads, P.seeds[0], "cpu")
     models = {}

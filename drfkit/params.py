@@ -328,3 +328,13 @@ def for_notebook(notebook: str, values: dict[str, Any]) -> Params:
     """The validated parameters of ``notebook`` from a whole profile's values (``load_profile``,
     overrides merged): what the command-line tools use to run as that notebook would."""
     return validate(notebook, notebook_params(notebook, values))
+
+
+def for_command(notebook: str, profile: str) -> Params | None:
+    """``for_notebook`` of a named profile for a command line: None after printing the
+    parameter error (the command then exits with status 2)."""
+    try:
+        return for_notebook(notebook, load_profile(profile))
+    except ParameterError as exc:
+        print(f"parameter error: {exc}")
+        return None

@@ -171,16 +171,14 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from drfkit.params import ParameterError, for_notebook, load_profile
+    from drfkit.params import for_command
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
-    try:
-        P = for_notebook("01_pendulum_training", load_profile(args.profile))
-    except ParameterError as exc:
-        print(f"parameter error: {exc}")
+    P = for_command("01_pendulum_training", args.profile)
+    if P is None:
         return 2
     torch.set_num_threads(args.threads)
     import matplotlib
