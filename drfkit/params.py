@@ -6,9 +6,12 @@ injects a string where an int was meant. So every notebook calls
 key, a wrong type or an out-of-range value stops the notebook there, with a message
 that names the key, the notebook and the allowed values.
 
-The YAML profiles in ``params/`` are flat: one key per parameter, shared by every
-notebook that declares it (data parameters are read by several notebooks, and must
-agree so that cached artefacts are found).
+The YAML profiles in ``params/`` are nested by section (``pendulum:``, ``pendulum.book:``,
+``pedestrians:``, ``monoloco:``, ...; ``SCHEMA`` below is their layout, with a Python type, the
+allowed values and a check for every key). Notebooks see one flat name per parameter, because
+papermill injects top-level variables: a section's prefix plus the key (``pendulum.book.epochs``
+is ``pend_book_epochs``), shared by every notebook that declares it (data parameters are read by
+several notebooks, and must agree so that cached artefacts are found).
 """
 from __future__ import annotations
 
@@ -16,7 +19,7 @@ import math
 import types
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, get_args, get_origin
 
 import yaml
 
@@ -31,9 +34,24 @@ class ParameterError(ValueError):
 
 @dataclass(frozen=True)
 class Spec:
-    kind: str  # 'int' | 'float' | 'str' | 'bool' | 'list[int]' | 'list[float]' | 'list[str]' | 'dict'
+    """One parameter: its Python type, the allowed values in words and as a check."""
+    type: Any  # int, float, str, bool, dict, list[int], list[float] or list[str]
     allowed: str  # human-readable description of the allowed values
     check: Callable[[Any], bool] = lambda v: True
+    doc: str = ""
+    name: str = ""  # the notebook's name for it when it is not the section's prefix + key
+
+    @property
+    def kind(self) -> str:
+        """``int``, ``list[float]``, ...: how messages name the type."""
+        return self.type.__name__ if isinstance(self.type, type) and get_origin(self.type) is None else str(self.type)
+
+
+@dataclass(frozen=True)
+class Section:
+    """A YAML section: its keys' notebook names are ``prefix`` + key (prefixes of nested sections add up)."""
+    prefix: str
+    keys: dict[str, "Spec | Section"]
     doc: str = ""
 
 
@@ -41,110 +59,145 @@ def _in01(v: float) -> bool:
     return 0.0 <= v <= 1.0
 
 
+def _levels(v: list[float]) -> bool:
+    return len(v) > 0 and all(map(_in01, v))
+
+
+def _seeds(v: list[int]) -> bool:
+    return len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0
+
+
+def _subset(options) -> Callable[[list[str]], bool]:
+    return lambda v: len(v) > 0 and set(v) <= set(options)
+
+
 PEND_MODELS = STUDIES["pendulum"].kinds
 PED_MODELS = STUDIES["pedestrians"].kinds
 STUDY_NAMES = tuple(STUDIES)
+_POSITIVE = ("an integer >= 1", lambda v: v >= 1)
+_RATE = ("a number in (0, 1)", lambda v: 0 < v < 1)
+_LEVELS = "a non-empty list of numbers in [0, 1]"
+_SEEDS = "a non-empty list of distinct integers >= 0"
 
-SPECS: dict[str, Spec] = {
-    # -- common -----------------------------------------------------------------------
-    "profile": Spec("str", "a folder name of letters, digits, '_' or '-'",
-                    lambda v: v.replace("_", "").replace("-", "").isalnum(),
-                    "results land in results/<profile>/"),
-    "seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
-                  lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0,
-                  "one training run per seed; spread over seeds gives the error bars"),
-    "device": Spec("str", "'auto', 'cpu' or 'cuda'", lambda v: v in ("auto", "cpu", "cuda")),
-    "threads": Spec("int", "an integer >= 0 (0 keeps torch's default)", lambda v: v >= 0),
-    # -- pendulum data --------------------------------------------------------------------
-    "pend_train_sequences": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_val_sequences": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_test_sequences": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_seq_len": Spec("int", "an integer >= 6 (the first 5 frames are clean)", lambda v: v >= 6),
-    "pend_train_max_noise": Spec("float", "a number in [0, 1]", _in01),
-    "pend_eval_max_noise": Spec("list[float]", "a non-empty list of numbers in [0, 1]",
-                                lambda v: len(v) > 0 and all(map(_in01, v))),
-    "pend_sweep_max_noise": Spec("list[float]", "a non-empty list of numbers in [0, 1]",
-                                 lambda v: len(v) > 0 and all(map(_in01, v))),
-    "pend_data_seed": Spec("int", "an integer >= 0", lambda v: v >= 0),
-    # -- pendulum training ---------------------------------------------------------------
-    "pend_models": Spec("list[str]", f"a non-empty subset of {list(PEND_MODELS)}",
-                        lambda v: len(v) > 0 and set(v) <= set(PEND_MODELS)),
-    "pend_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
-    "pend_patience": Spec("int", "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
-                          "stop a run after this many epochs without a better validation NLL"),
-    "pend_protocols": Spec("list[str]", f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
-                           lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
-                           "the training protocols notebook 01 trains and evaluates (drfkit.protocols)"),
-    "pend_book_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1, "epochs of the book's protocol"),
-    "pend_book_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "pend_book_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
-    "pend_book_patience": Spec("int", "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
-                               "stop a book-protocol run after this many epochs without a better validation NLL"),
-    # -- the dynamics study (notebook 01) ------------------------------------------------------
-    "bound_particles": Spec("int", "an integer >= 10", lambda v: v >= 10,
-                            "particles of the true-physics bound (drfkit.oracle)"),
-    "ablation_budget": Spec("str", f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
-    "ablation_variants": Spec("list[str]", f"a non-empty subset of {list(VARIANTS)}",
-                              lambda v: len(v) > 0 and set(v) <= set(VARIANTS)),
-    "ablation_seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
-                           lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0),
-    "regime_train_noise": Spec("list[float]", "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
-                               lambda v: 0.5 in v and all(map(_in01, v)) and len(set(v)) == len(v),
-                               "max noise levels the noise-regime map trains at (drfkit.regime; 0.5 is the "
-                               "book's own protocol, others are drfkit.protocols.regime_variant)"),
-    "regime_seeds": Spec("list[int]", "a non-empty list of distinct integers >= 0",
-                         lambda v: len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0),
-    "regime_test_sequences": Spec("int", "an integer >= 1", lambda v: v >= 1,
-                                  "sequences of the regime map's own test split (at every sweep level)"),
-    # -- pedestrian data ---------------------------------------------------------------------
-    "ped_source": Spec("str", "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
-    "nuscenes_root": Spec("str", "'' (none) or a folder holding <nuscenes_version>/sample.json ..."),
-    "nuscenes_version": Spec("str", "e.g. 'v1.0-mini' or 'v1.0-trainval'", lambda v: len(v) > 0),
-    "pifpaf_predictions": Spec("str", "'' (none) or a folder with one sub-folder of PifPaf JSON per noise level"),
-    "ped_n_scenes": Spec("int", "an integer >= 3 (train/val/test split by scene)", lambda v: v >= 3),
-    "ped_frames_per_scene": Spec("int", "an integer >= 2", lambda v: v >= 2),
-    "ped_train_p": Spec("float", "a number in [0, 1]", _in01),
-    "ped_eval_p": Spec("list[float]", "a non-empty list of numbers in [0, 1]",
-                       lambda v: len(v) > 0 and all(map(_in01, v))),
-    "ped_sweep_p": Spec("list[float]", "a non-empty list of numbers in [0, 1]",
-                        lambda v: len(v) > 0 and all(map(_in01, v))),
-    "ped_seq_len": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "ped_data_seed": Spec("int", "an integer >= 0", lambda v: v >= 0),
-    "sim_detector": Spec("dict", "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)"),
-    # -- pedestrian training ----------------------------------------------------------------
-    "ped_models": Spec("list[str]", f"a non-empty subset of {list(PED_MODELS)}",
-                       lambda v: len(v) > 0 and set(v) <= set(PED_MODELS)),
-    "ped_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "ped_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "ped_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
-    "monoloco_epochs": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "monoloco_batch_size": Spec("int", "an integer >= 1", lambda v: v >= 1),
-    "monoloco_lr": Spec("float", "a number in (0, 1)", lambda v: 0 < v < 1),
-    # -- evaluation ------------------------------------------------------------------------
-    "eval_studies": Spec("list[str]", f"a non-empty subset of {list(STUDY_NAMES)}, without repeats",
-                         lambda v: len(v) > 0 and set(v) <= set(STUDY_NAMES) and len(set(v)) == len(v),
-                         "which studies notebooks 03 and 05 evaluate (both, unless one's models are not "
-                         "trained yet: its claims are then listed as not evaluated)"),
-    # -- uncertainty ---------------------------------------------------------------------
-    "n_samples": Spec("int", "an integer >= 1 (Monte Carlo dropout passes)", lambda v: v >= 1),
-    "dropout_rates": Spec("list[float]", "a non-empty list of numbers in [0, 1)",
-                          lambda v: len(v) > 0 and all(0 <= x < 1 for x in v)),
-    "interval_level": Spec("float", "a number in (0, 1), e.g. 0.95", lambda v: 0 < v < 1),
-    # -- timing ------------------------------------------------------------------------------
-    "timing_batch_sizes": Spec("list[int]", "a non-empty list of integers >= 1",
-                               lambda v: len(v) > 0 and min(v) >= 1),
-    "timing_threads": Spec("list[int]", "a non-empty list of integers >= 1",
-                           lambda v: len(v) > 0 and min(v) >= 1),
-    "timing_min_run_time": Spec("float", "seconds > 0 per measurement", lambda v: v > 0),
-    # -- gating ------------------------------------------------------------------------------
-    "gating_picp_tolerance": Spec("float", "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),
-    "gating_sweep_points": Spec("int", "an integer >= 2", lambda v: v >= 2),
-    "gating_timing_frames": Spec("int", "an integer >= 0 (0 = every test frame)", lambda v: v >= 0,
-                                 "about this many real frames, of evenly spaced test sequences, are what the "
-                                 "gating times are measured on; metrics use every test sequence"),
-}
+# The profile's layout: what params/*.yaml hold, section by section. Notebooks (papermill injects
+# top-level names) see the flat names: pendulum.book.epochs is pend_book_epochs.
+SCHEMA = Section("", {
+    "profile": Spec(str, "a folder name of letters, digits, '_' or '-'",
+                    lambda v: v.replace("_", "").replace("-", "").isalnum(), "results land in results/<profile>/"),
+    "seeds": Spec(list[int], _SEEDS, _seeds, "one training run per seed; spread over seeds gives the error bars"),
+    "device": Spec(str, "'auto', 'cpu' or 'cuda'", lambda v: v in ("auto", "cpu", "cuda")),
+    "threads": Spec(int, "an integer >= 0 (0 keeps torch's default)", lambda v: v >= 0),
+    "pendulum": Section("pend_", {
+        "train_sequences": Spec(int, *_POSITIVE),
+        "val_sequences": Spec(int, *_POSITIVE),
+        "test_sequences": Spec(int, *_POSITIVE),
+        "seq_len": Spec(int, "an integer >= 6 (the first 5 frames are clean)", lambda v: v >= 6),
+        "train_max_noise": Spec(float, "a number in [0, 1]", _in01),
+        "eval_max_noise": Spec(list[float], _LEVELS, _levels),
+        "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
+        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
+        "models": Spec(list[str], f"a non-empty subset of {list(PEND_MODELS)}", _subset(PEND_MODELS)),
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+        "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                         "stop a run after this many epochs without a better validation NLL"),
+        "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
+                          lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
+                          "the training protocols notebook 01 trains and evaluates (drfkit.protocols)"),
+        "book": Section("book_", {
+            "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
+            "batch_size": Spec(int, *_POSITIVE),
+            "lr": Spec(float, *_RATE),
+            "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                             "stop a book-protocol run after this many epochs without a better validation NLL"),
+        }, "the book's training protocol (drfkit.protocols)"),
+    }, "the noisy pendulum: data, then training under the paper's protocol"),
+    "dynamics": Section("", {
+        "bound_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
+                                "particles of the true-physics bound (drfkit.oracle)"),
+        "ablation": Section("ablation_", {
+            "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
+            "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
+            "seeds": Spec(list[int], _SEEDS, _seeds),
+        }),
+        "regime": Section("regime_", {
+            "train_noise": Spec(list[float], "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
+                                lambda v: 0.5 in v and all(map(_in01, v)) and len(set(v)) == len(v),
+                                "max noise levels the noise-regime map trains at (drfkit.regime; 0.5 is the "
+                                "book's own protocol, others are drfkit.protocols.regime_variant)"),
+            "seeds": Spec(list[int], _SEEDS, _seeds),
+            "test_sequences": Spec(int, *_POSITIVE, "sequences of the regime map's own test split (every level)"),
+        }),
+    }, "notebook 01's dynamics study"),
+    "pedestrians": Section("ped_", {
+        "source": Spec(str, "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
+        "nuscenes_root": Spec(str, "'' (none) or a folder holding <nuscenes_version>/sample.json ...",
+                              name="nuscenes_root"),
+        "nuscenes_version": Spec(str, "e.g. 'v1.0-mini' or 'v1.0-trainval'", lambda v: len(v) > 0,
+                                 name="nuscenes_version"),
+        "pifpaf_predictions": Spec(str, "'' (none) or a folder with one sub-folder of PifPaf JSON per noise level",
+                                   name="pifpaf_predictions"),
+        "n_scenes": Spec(int, "an integer >= 3 (train/val/test split by scene)", lambda v: v >= 3),
+        "frames_per_scene": Spec(int, "an integer >= 2", lambda v: v >= 2),
+        "train_p": Spec(float, "a number in [0, 1]", _in01),
+        "eval_p": Spec(list[float], _LEVELS, _levels),
+        "sweep_p": Spec(list[float], _LEVELS, _levels),
+        "seq_len": Spec(int, *_POSITIVE),
+        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
+        "sim_detector": Spec(dict, "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)",
+                             name="sim_detector"),
+        "models": Spec(list[str], f"a non-empty subset of {list(PED_MODELS)}", _subset(PED_MODELS)),
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+    }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
+    "monoloco": Section("monoloco_", {
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+    }, "Monoloco's own schedule"),
+    "evaluation": Section("eval_", {
+        "studies": Spec(list[str], f"a non-empty subset of {list(STUDY_NAMES)}, without repeats",
+                        lambda v: len(v) > 0 and set(v) <= set(STUDY_NAMES) and len(set(v)) == len(v),
+                        "which studies notebooks 03 and 05 evaluate (both, unless one's models are not trained "
+                        "yet: its claims are then listed as not evaluated)"),
+    }),
+    "uncertainty": Section("", {
+        "n_samples": Spec(int, "an integer >= 1 (Monte Carlo dropout passes)", lambda v: v >= 1),
+        "dropout_rates": Spec(list[float], "a non-empty list of numbers in [0, 1)",
+                              lambda v: len(v) > 0 and all(0 <= x < 1 for x in v)),
+        "interval_level": Spec(float, "a number in (0, 1), e.g. 0.95", lambda v: 0 < v < 1),
+    }),
+    "timing": Section("timing_", {
+        "batch_sizes": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
+        "threads": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
+        "min_run_time": Spec(float, "seconds > 0 per measurement", lambda v: v > 0),
+    }),
+    "gating": Section("gating_", {
+        "picp_tolerance": Spec(float, "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),
+        "sweep_points": Spec(int, "an integer >= 2", lambda v: v >= 2),
+        "timing_frames": Spec(int, "an integer >= 0 (0 = every test frame)", lambda v: v >= 0,
+                              "about this many real frames, of evenly spaced test sequences, are what the gating "
+                              "times are measured on; metrics use every test sequence"),
+    }),
+})
+
+
+def _flatten_schema(section: Section, prefix: str = "", path: tuple[str, ...] = ()):
+    for key, item in section.keys.items():
+        if isinstance(item, Section):
+            yield from _flatten_schema(item, prefix + item.prefix, path + (key,))
+        else:
+            yield (item.name or prefix + key), path + (key,), item
+
+
+# the flat (notebook) name of every parameter -> its spec, and -> its path in the YAML profile
+SPECS: dict[str, Spec] = {name: spec for name, _, spec in _flatten_schema(SCHEMA)}
+PATHS: dict[str, tuple[str, ...]] = {name: path for name, path, _ in _flatten_schema(SCHEMA)}
+_BY_PATH = {".".join(path): name for name, path in PATHS.items()}
+assert len(SPECS) == len(_BY_PATH), "two parameters share a notebook name"
+
 
 _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
@@ -180,39 +233,39 @@ class Params(types.SimpleNamespace):
         return dict(vars(self))
 
 
-def _coerce(key: str, kind: str, value: Any, where: str) -> Any:
+def _coerce(key: str, typ: Any, value: Any, where: str) -> Any:
     def fail(expected: str) -> ParameterError:
         return ParameterError(
             f"{where}: parameter '{key}' must be {expected}, got {value!r} ({type(value).__name__}); "
             f"allowed: {SPECS[key].allowed}"
         )
 
-    if kind == "int":
+    if typ is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise fail("an integer")
         return int(value)
-    if kind == "float":
+    if typ is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise fail("a finite number")
         return float(value)
-    if kind == "str":
+    if typ is str:
         if not isinstance(value, str):
             raise fail("a string")
         return value
-    if kind == "bool":
+    if typ is bool:
         if not isinstance(value, bool):
             raise fail("true or false")
         return value
-    if kind == "dict":
+    if typ is dict:
         if not isinstance(value, dict):
             raise fail("a mapping")
         return dict(value)
-    if kind.startswith("list["):
+    if get_origin(typ) is list:
         if not isinstance(value, (list, tuple)):
-            raise fail(f"a list ({kind})")
-        inner = kind[5:-1]
+            raise fail(f"a list ({SPECS[key].kind})")
+        (inner,) = get_args(typ)
         return [_coerce(key, inner, v, where) for v in value]
-    raise AssertionError(f"unknown kind {kind}")
+    raise AssertionError(f"unknown type {typ}")
 
 
 def validate(notebook: str, values: dict[str, Any]) -> Params:
@@ -236,7 +289,7 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
     out = {}
     for key in allowed_keys:
         spec = SPECS[key]
-        value = _coerce(key, spec.kind, values[key], where)
+        value = _coerce(key, spec.type, values[key], where)
         if not spec.check(value):
             raise ParameterError(
                 f"{where}: parameter '{key}' = {value!r} is out of range; allowed: {spec.allowed}"
@@ -276,8 +329,64 @@ def notebook_globals(namespace: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _section_at(path: tuple[str, ...]) -> Section:
+    section = SCHEMA
+    for key in path:
+        section = section.keys[key]
+    return section
+
+
+def flatten_profile(nested: dict[str, Any], where: str) -> dict[str, Any]:
+    """A profile's nested sections -> {notebook name: value}; unknown keys and misplaced ones are errors."""
+    flat: dict[str, Any] = {}
+
+    def walk(values: Any, path: tuple[str, ...]) -> None:
+        section = _section_at(path)
+        label = ".".join(path) or "the top level"
+        if not isinstance(values, dict):
+            raise ParameterError(f"{where}: '{label}' must be a section (a mapping of key: value), got {values!r}")
+        for key, value in values.items():
+            item = section.keys.get(key)
+            if item is None:
+                hint = ""
+                if key in SPECS:  # a flat name where a nested one belongs (profiles before sections)
+                    hint = f"; '{key}' is written as {'.'.join(PATHS[key])} (sections in params/quick.yaml)"
+                raise ParameterError(f"{where}: unknown parameter {'.'.join(path + (str(key),))!r}{hint}; "
+                                     f"{label} holds: {list(section.keys)}")
+            if isinstance(item, Section):
+                walk(value, path + (key,))
+            else:
+                flat[_BY_PATH[".".join(path + (key,))]] = value
+
+    walk(nested, ())
+    return flat
+
+
+def nest_profile(flat: dict[str, Any]) -> dict[str, Any]:
+    """{notebook name: value} -> the profile's nested sections (``flatten_profile``'s inverse)."""
+    unknown = sorted(set(flat) - set(SPECS))
+    if unknown:
+        raise ParameterError(f"unknown parameter(s) {unknown}; known parameters: {sorted(SPECS)}")
+    nested: dict[str, Any] = {}
+    for name, value in flat.items():
+        *sections, key = PATHS[name]
+        node = nested
+        for s in sections:
+            node = node.setdefault(s, {})
+        node[key] = value
+    return nested
+
+
+def write_profile(path: str | Path, flat: dict[str, Any]) -> Path:
+    """Write ``flat`` (e.g. ``load_profile("quick") | {...}``) as a nested YAML profile at ``path``."""
+    path = Path(path)
+    path.write_text(yaml.safe_dump(nest_profile(flat), sort_keys=False))
+    return path
+
+
 def load_profile(profile: str | Path) -> dict[str, Any]:
-    """Read ``params/<profile>.yaml`` (or a path) and check every key exists in the schema."""
+    """Read ``params/<profile>.yaml`` (or a path): its sections checked against ``SCHEMA``,
+    returned flat, ``{notebook name: value}``."""
     path = Path(profile)
     if path.suffix not in (".yaml", ".yml"):
         path = PARAMS_DIR / f"{profile}.yaml"
@@ -288,27 +397,24 @@ def load_profile(profile: str | Path) -> dict[str, Any]:
         values = yaml.safe_load(fh) or {}
     if not isinstance(values, dict):
         raise ParameterError(f"{path}: expected a mapping of parameter: value")
-    unknown = sorted(set(values) - set(SPECS))
-    if unknown:
-        raise ParameterError(
-            f"{path}: unknown parameter(s) {unknown}; known parameters: {sorted(SPECS)}"
-        )
-    return values
+    return flatten_profile(values, str(path))
 
 
 def parse_overrides(items: list[str] | None) -> dict:
-    """``["key=yaml value", ...]`` -> {key: value}, keys checked against the schema (the
-    ``--set`` option of ``drfkit.pipeline`` and ``drfkit.studies``)."""
+    """``["key=yaml value", ...]`` -> {notebook name: value}, for the ``--set`` option of
+    ``drfkit.pipeline`` and ``drfkit.studies``; a key is a profile path (``pendulum.epochs``) or
+    the notebook name (``pend_epochs``)."""
     out = {}
     for item in items or []:
         key, sep, text = item.partition("=")
         if not sep or not key:
-            raise ParameterError(f"--set expects KEY=VALUE (VALUE in YAML, e.g. eval_studies=[pedestrians]), "
+            raise ParameterError(f"--set expects KEY=VALUE (VALUE in YAML, e.g. evaluation.studies=[pedestrians]), "
                                  f"got {item!r}")
-        if key not in SPECS:
-            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(SPECS)}")
+        name = _BY_PATH.get(key, key)
+        if name not in SPECS:
+            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(_BY_PATH)}")
         try:
-            out[key] = yaml.safe_load(text)
+            out[name] = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise ParameterError(f"--set {key}: {text!r} is not a YAML value ({exc})") from None
     return out

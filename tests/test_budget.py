@@ -1,19 +1,18 @@
 """The training-time estimate: measured step times scaled by batches, epochs and seeds."""
 import pandas as pd
 import pytest
-import yaml
 
 from drfkit import budget
-from drfkit.paths import PARAMS_DIR
+from drfkit.params import load_profile, write_profile
 
 
 def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values = load_profile("quick")
     values.update(profile="tiny", pend_train_sequences=6, pend_val_sequences=2, pend_test_sequences=2,
                   pend_seq_len=8, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=3, seeds=[0, 1, 2])
     path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(values))
+    write_profile(path, values)
     assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
     table = pd.read_csv(tmp_path / "tiny" / "training_budget.csv")
     assert set(zip(table["study"], table["model"])) == (
@@ -35,15 +34,15 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
 
 def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
     from drfkit import studies
-    from drfkit.params import load_profile, notebook_params, validate
+    from drfkit.params import notebook_params, validate
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values = load_profile("quick")
     values.update(profile="tiny", pend_train_sequences=4, pend_val_sequences=2, pend_test_sequences=2,
                   pend_seq_len=6, pend_batch_size=2, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=2,
                   seeds=[0, 1])
     path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(values))
+    write_profile(path, values)
     # one of the two no_dynamics seeds fully trained: 2 of 4 epochs done, half the hours left
     assert studies.main(["--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "1"]) == 0
@@ -60,13 +59,13 @@ def test_budget_counts_a_run_stopped_by_patience_as_finished(tmp_path, monkeypat
     import torch
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    values = load_profile("quick")
     values.update(profile="tiny", pend_train_sequences=4, pend_val_sequences=2, pend_test_sequences=2,
                   pend_seq_len=6, pend_batch_size=2, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=5,
                   pend_patience=1, seeds=[0])
     path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(values))
-    from drfkit.params import load_profile, notebook_params, validate
+    write_profile(path, values)
+    from drfkit.params import notebook_params, validate
 
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(str(path))))
     stem = studies.checkpoint_stem(P, "pendulum", "no_dynamics", 0)

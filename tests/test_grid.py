@@ -16,10 +16,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import torch
-import yaml
 
 from drfkit import grid, studies
-from drfkit.params import PARAMS_DIR, ParameterError, load_profile
+from drfkit.params import ParameterError, load_profile, write_profile
 
 slow = pytest.mark.skipif(bool(os.environ.get("DRF_SKIP_SLOW")), reason="DRF_SKIP_SLOW is set: Dask cluster tests")
 
@@ -30,7 +29,7 @@ RUNS = 6
 
 
 def _write_profile(path: Path, **extra) -> Path:
-    path.write_text(yaml.safe_dump(yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | TINY | extra))
+    write_profile(path, load_profile("quick") | TINY | extra)
     return path
 
 

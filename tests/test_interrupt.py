@@ -9,10 +9,10 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 
 from drfkit import pipeline
-from drfkit.paths import PARAMS_DIR, REPO_ROOT
+from drfkit.params import load_profile, write_profile
+from drfkit.paths import REPO_ROOT
 
 
 def _tree(pid: int) -> list[int]:
@@ -20,9 +20,9 @@ def _tree(pid: int) -> list[int]:
 
 
 def test_sigterm_to_make_stops_the_tree_and_restores_the_outputs(tmp_path):
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"profile": "stopped"}
+    values = load_profile("quick") | {"profile": "stopped"}
     profile = tmp_path / "stopped.yaml"
-    profile.write_text(yaml.safe_dump(values))
+    write_profile(profile, values)
     root = tmp_path / "results" / "stopped"
     (root / "tables").mkdir(parents=True)
     (root / "tables" / "pendulum_mae.csv").write_text("old,table\n")   # a previous run's output

@@ -7,7 +7,8 @@ import sys
 import pytest
 import yaml
 
-from drfkit.params import NOTEBOOKS, SPECS, ParameterError, load_profile, notebook_params, validate
+from drfkit.params import (NOTEBOOKS, PATHS, SPECS, ParameterError, load_profile, nest_profile, notebook_params,
+                           parse_overrides, validate, write_profile)
 from drfkit.paths import NOTEBOOKS_DIR, PARAMS_DIR, REPO_ROOT
 
 
@@ -114,24 +115,60 @@ def test_bad_detector_config_is_rejected():
 
 
 def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
-    bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"pend_epohcs": 3}
+    bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
+    bad["pendulum"]["epohcs"] = 3
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(bad))
     proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
-    assert "pend_epohcs" in proc.stderr and "unknown parameter" in proc.stderr
+    assert "'pendulum.epohcs'" in proc.stderr and "unknown parameter" in proc.stderr and "'epochs'" in proc.stderr
     assert "== 00_data_prep" not in proc.stdout
 
 
 def test_yaml_with_wrong_type_names_notebook_and_key(tmp_path):
-    bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"pend_epochs": "many"}
-    path = tmp_path / "bad.yaml"
-    path.write_text(yaml.safe_dump(bad))
+    path = write_profile(tmp_path / "bad.yaml", load_profile("quick") | {"pend_epochs": "many"})
     proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "pend_epochs" in proc.stderr and "notebook 01_pendulum_training" in proc.stderr
+
+
+def test_profiles_are_nested_by_section_and_flat_in_notebooks(tmp_path):
+    raw = yaml.safe_load((PARAMS_DIR / "paper.yaml").read_text())
+    flat = load_profile("paper")
+    assert raw["pendulum"]["book"]["epochs"] == flat["pend_book_epochs"]
+    assert raw["dynamics"]["regime"]["train_noise"] == flat["regime_train_noise"]
+    assert raw["pedestrians"]["nuscenes_root"] == flat["nuscenes_root"]  # a name of its own
+    assert raw["monoloco"]["lr"] == flat["monoloco_lr"] and raw["evaluation"]["studies"] == flat["eval_studies"]
+    assert set(PATHS) == set(SPECS) and len({PATHS[k] for k in SPECS}) == len(SPECS)
+    assert nest_profile(flat) == {k: v for k, v in raw.items()}  # the inverse, section for section
+    assert load_profile(write_profile(tmp_path / "again.yaml", flat)) == flat
+
+
+@pytest.mark.parametrize("profile, fragment", [
+    ({"pend_epochs": 3}, "'pend_epochs' is written as pendulum.epochs"),   # a flat name at the top
+    ({"pendulum": 3}, "'pendulum' must be a section"),
+    ({"pendulum": {"book": {"epoch": 3}}}, "pendulum.book.epoch"),
+])
+def test_misplaced_keys_name_where_they_belong(tmp_path, profile, fragment):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(profile))
+    with pytest.raises(ParameterError, match=fragment.replace(".", r"\.")):
+        load_profile(path)
+
+
+def test_overrides_take_the_profile_path_or_the_notebook_name():
+    assert parse_overrides(["pendulum.book.epochs=3", "pend_lr=0.01"]) == {"pend_book_epochs": 3, "pend_lr": 0.01}
+    with pytest.raises(ParameterError, match="unknown parameter 'pendulum.epohcs'"):
+        parse_overrides(["pendulum.epohcs=3"])
+
+
+def test_schema_types_are_python_types():
+    assert SPECS["pend_epochs"].type is int and SPECS["pend_eval_max_noise"].kind == "list[float]"
+    assert SPECS["sim_detector"].kind == "dict"
+    with pytest.raises(ParameterError, match=r"must be a list \(list\[float\]\)"):
+        validate("01_pendulum_training", quick_subset("01_pendulum_training") | {"pend_eval_max_noise": 0.5})
 
 
 def test_missing_profile_lists_known_ones():
@@ -184,3 +221,23 @@ def test_keep_outputs_copies_outputs_only_of_unchanged_code_cells(tmp_path):
     assert edited.cells[1].outputs[0]["data"]["text/plain"] == "1"
     changed = build_notebooks.parse(text.replace("x = 1", "x = 3"), "00_data_prep")
     assert build_notebooks.keep_outputs(changed, target) == 1 and changed.cells[1].outputs == []
+
+
+def test_keep_outputs_lets_the_parameters_cell_change_only_its_comments(tmp_path):
+    import nbformat
+
+    sys.path.insert(0, str(REPO_ROOT / "tools"))
+    import build_notebooks
+
+    def notebook(params_source):
+        nb = build_notebooks.parse("# %%\nx = 1\nx\n", "00_data_prep")
+        cell = nbformat.v4.new_code_cell(params_source, metadata={"tags": ["parameters"]})
+        nb.cells.insert(0, cell)
+        return nb
+
+    old = notebook("# a: old words\na = 1\n")
+    old.cells[1].outputs = [nbformat.v4.new_output("execute_result", {"text/plain": "1"}, execution_count=1)]
+    target = tmp_path / "nb.ipynb"
+    nbformat.write(old, target)
+    assert build_notebooks.keep_outputs(notebook("# a [section.a]: new words\na = 1\n"), target) == 0
+    assert build_notebooks.keep_outputs(notebook("# a: old words\na = 2\n"), target) == 1  # a value: re-execute

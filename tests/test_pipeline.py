@@ -6,17 +6,17 @@ import sys
 
 import pytest
 import torch
-import yaml
 
-from drfkit.paths import PARAMS_DIR, REPO_ROOT
+from drfkit.params import load_profile, write_profile
+from drfkit.paths import REPO_ROOT
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="the failure used here is asking for a GPU that is absent")
 def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     # valid parameters, but device 'cuda' on a CPU-only machine fails in the notebook's first cell
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {"profile": "failing", "device": "cuda"}
+    values = load_profile("quick") | {"profile": "failing", "device": "cuda"}
     path = tmp_path / "failing.yaml"
-    path.write_text(yaml.safe_dump(values))
+    write_profile(path, values)
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin"}
     proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path),
                            "--only", "00_data_prep", "04_timing"],

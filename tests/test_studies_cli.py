@@ -1,20 +1,19 @@
 """``python -m drfkit.studies`` trains exactly the checkpoints a notebook would use, so a
 long profile can be spread over processes or sessions."""
 import pytest
-import yaml
 
 from drfkit import studies
-from drfkit.params import PARAMS_DIR, load_profile, notebook_params, validate
+from drfkit.params import load_profile, notebook_params, validate, write_profile
 
 
 @pytest.fixture
 def tiny_profile(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
-    values = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text()) | {
+    values = load_profile("quick") | {
         "profile": "tiny", "pend_train_sequences": 4, "pend_val_sequences": 2, "pend_test_sequences": 2,
         "pend_seq_len": 6, "pend_epochs": 1, "pend_batch_size": 2, "seeds": [0, 1]}
     path = tmp_path / "tiny.yaml"
-    path.write_text(yaml.safe_dump(values))
+    write_profile(path, values)
     return path
 
 

@@ -8,11 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-import yaml
 
 from drfkit import timing
 from drfkit.models import DeepRecursiveFilter, LSTMBaseline, NoDynamics, build_model, default_config, parts
 from drfkit.models.sequence import _EncodedSequenceModel
+from drfkit.params import write_profile
 from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
                            inference_benchmark, make_frame_fn)
 
@@ -261,9 +261,9 @@ def test_bad_arguments_fail_early_with_the_fix():
 def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
     profile = tmp_path / "tiny.yaml"
-    profile.write_text(yaml.safe_dump({
+    write_profile(profile, {
         "profile": "tiny", "seeds": [0], "device": "cpu", "threads": 0, "n_samples": 2,
-        "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01}))
+        "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01})
     assert timing.main(["--profile", str(profile)]) == 0
     written = pd.read_csv(tmp_path / "results" / "tiny" / "timing.csv")
     assert list(written.columns) == COLUMNS

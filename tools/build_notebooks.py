@@ -23,12 +23,13 @@ SRC, OUT = ROOT / "notebooks" / "src", ROOT / "notebooks"
 def parameters_cell(notebook: str) -> str:
     """The notebook's parameters, with the quick profile's values (what nbval runs)."""
     sys.path.insert(0, str(ROOT))
-    from drfkit.params import NOTEBOOKS, SPECS, load_profile
+    from drfkit.params import NOTEBOOKS, PATHS, SPECS, load_profile
 
     quick = load_profile("quick")
-    lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them."]
+    lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them.",
+             "# Each name's place in a profile's sections is in brackets."]
     for key in NOTEBOOKS[notebook]:
-        lines += [f"# {key}: {SPECS[key].allowed}", f"{key} = {quick[key]!r}"]
+        lines += [f"# {key} [{'.'.join(PATHS[key])}]: {SPECS[key].allowed}", f"{key} = {quick[key]!r}"]
     return "\n".join(lines)
 
 
@@ -60,19 +61,35 @@ def execute(path: Path, timeout: int = 1800) -> None:
     nbformat.write(nb, path)
 
 
+def _same_names(cell, old_cells, i: int) -> bool:
+    """Whether ``cell`` defines exactly what the old notebook's cell ``i`` defined (same values)."""
+    if i >= len(old_cells) or old_cells[i].cell_type != "code" or old_cells[i].outputs:
+        return False
+    defined = [{}, {}]
+    for ns, source in zip(defined, (cell.source, old_cells[i].source)):
+        exec(source, ns)
+        ns.pop("__builtins__", None)
+    return defined[0] == defined[1]
+
+
 def keep_outputs(new: nbformat.NotebookNode, target: Path) -> int:
     """Copy the stored outputs of ``target`` into ``new`` for every code cell whose source did not
     change (matched by position and source); returns how many code cells had to lose theirs.
-    For edits of markdown cells, which need no re-execution."""
+    For edits of markdown cells, which need no re-execution. The ``parameters`` cell is generated and
+    defines names only (no outputs): a change to its comments or layout loses nothing."""
     if not target.exists():
         return sum(c.cell_type == "code" for c in new.cells)
     old = nbformat.read(target, as_version=4)
+    new.metadata = old.metadata  # the execution's metadata (widget state, language version) goes with its outputs
     old_code = {(i, c.source): c for i, c in enumerate(old.cells) if c.cell_type == "code"}
     missing = 0
     for i, cell in enumerate(new.cells):
         if cell.cell_type != "code":
             continue
         match = old_code.get((i, cell.source))
+        if match is None and "parameters" in cell.metadata.get("tags", []) and _same_names(cell, old.cells, i):
+            cell.execution_count = old.cells[i].execution_count
+            continue
         if match is None:
             missing += 1
         else:
