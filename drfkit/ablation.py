@@ -25,6 +25,7 @@ from typing import Any
 import pandas as pd
 import torch
 
+from drfkit.data.noise import Noise
 from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout, with_random_blackouts
 from drfkit.diagnostics import blackout_summary, diagnose
 from drfkit.dynamics import BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
@@ -40,10 +41,10 @@ DATA_SEED = 1000  # the profiles' pend_data_seed: train = seed, val = seed + 1 (
 EVAL_LEVELS = (0.5, 0.75, 1.0)
 
 
-def _split(cache: Path, budget: dict, split: str, max_noise: float) -> dict:
+def _split(cache: Path, budget: dict, split: str, level: float) -> dict:
     n = budget["train_sequences"] if split == "train" else budget["val_sequences"]
     seed = DATA_SEED + (0 if split == "train" else 1)
-    return load_pendulum(cache, f"ablation-{split}", n, budget["seq_len"], max_noise, seed)
+    return load_pendulum(cache, f"ablation-{split}", n, budget["seq_len"], Noise("rkn_uniform", level), seed)
 
 
 def _as_data(arrays: dict) -> SequenceData:

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from drfkit import ablation
+from drfkit.data.noise import Noise
 from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout
 from drfkit.diagnostics import abs_error_per_frame, blackout_summary
 from drfkit.dynamics import BLACKOUT_SEED_OFFSET, bound_on
@@ -42,7 +43,7 @@ BLACKOUT_NOISE = 0.5  # the blackout set's frames outside the blackout, for ever
 def _test_sets(out, budget: dict, levels: Iterable[float], n_test: int) -> dict[Any, dict[str, np.ndarray]]:
     """The regime's test splits: one per max noise level, and 'blackout'."""
     cache = ablation.data_dir(out)
-    split = lambda level: load_pendulum(cache, "regime-test", n_test, budget["seq_len"], float(level), TEST_SEED)  # noqa: E731
+    split = lambda level: load_pendulum(cache, "regime-test", n_test, budget["seq_len"], Noise("rkn_uniform", level), TEST_SEED)  # noqa: E731
     sets: dict[Any, dict[str, np.ndarray]] = {float(level): split(level) for level in levels}
     sets["blackout"] = with_blackout(split(BLACKOUT_NOISE), *blackout_frames(budget["seq_len"]),
                                      seed=TEST_SEED + BLACKOUT_SEED_OFFSET)

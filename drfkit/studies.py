@@ -17,6 +17,7 @@ import pandas as pd
 import torch
 
 from drfkit import registry
+from drfkit.data.noise import Noise
 from drfkit.io import atomic_write_csv, param_hash
 from drfkit.paths import data_dir, models_dir, tables_dir
 from drfkit.protocols import PROTOCOLS, protocol_spec
@@ -27,22 +28,21 @@ SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
 
 
 # --------------------------------------------------------------------------- pendulum
-def pendulum_split(P, split: str, max_noise: float | None = None) -> dict[str, Any]:
-    """Arrays of a pendulum split (``max_noise`` defaults to the training noise)."""
+def pendulum_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
+    """Arrays of a pendulum split; ``noise`` a ``Noise`` or its max noise level (default: the training noise)."""
     from drfkit.data.pendulum import load_pendulum
 
     n = {"train": P.pend_train_sequences, "val": P.pend_val_sequences, "test": P.pend_test_sequences}[split]
-    noise = P.pend_train_max_noise if max_noise is None else float(max_noise)
-    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, noise,
+    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, study_noise(P, "pendulum", noise),
                          P.pend_data_seed + SPLIT_SEED_OFFSET[split])
 
 
-def pendulum_data(P, split: str, max_noise: float | None = None, protocol: str = "paper") -> SequenceData:
+def pendulum_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
     """A split as tensors; a protocol with training blackouts (``drfkit.protocols``) adds them to
     the training split only (validation and test stay as the benchmark makes them)."""
     from drfkit.data.pendulum import with_random_blackouts
 
-    arrays = pendulum_split(P, split, max_noise)
+    arrays = pendulum_split(P, split, noise)
     blackouts = protocol_spec(protocol, "drf")["blackouts"]
     if split == "train" and blackouts:
         arrays = with_random_blackouts(arrays, blackouts["fraction"], tuple(blackouts["lengths"]),
@@ -61,31 +61,31 @@ def _pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------- pedestrians
-def pedestrian_records(P, noise_p: float) -> dict[str, Any]:
-    """Per-detection records at salt-and-pepper probability ``noise_p`` (all splits)."""
+def pedestrian_records(P, noise: Noise | float | None = None) -> dict[str, Any]:
+    """Per-detection records under ``noise`` (a ``Noise`` or its salt-and-pepper p; default the training
+    noise), all splits."""
     from drfkit.data.pedestrians import load_pedestrians
     from drfkit.data.sim_detector import DetectorConfig
 
     return load_pedestrians(
-        data_dir(P.profile), P.ped_source, noise_p, n_scenes=P.ped_n_scenes,
+        data_dir(P.profile), P.ped_source, study_noise(P, "pedestrians", noise), n_scenes=P.ped_n_scenes,
         frames_per_scene=P.ped_frames_per_scene, seed=P.ped_data_seed,
         detector=DetectorConfig.from_dict(P.sim_detector),
         nuscenes_root=P.nuscenes_root or None, predictions_root=P.pifpaf_predictions or None,
         nuscenes_version=P.nuscenes_version)
 
 
-def pedestrian_split(P, split: str, noise_p: float | None = None) -> dict[str, Any]:
+def pedestrian_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
     """Sequences of one split (split by scene, the same scenes at every noise level)."""
     from drfkit.data.records import make_sequences, split_by_scene
 
-    p = P.ped_train_p if noise_p is None else float(noise_p)
-    splits = split_by_scene(pedestrian_records(P, p), seed=P.ped_data_seed)
+    splits = split_by_scene(pedestrian_records(P, noise), seed=P.ped_data_seed)
     return make_sequences(splits[split], P.ped_seq_len)
 
 
-def pedestrian_data(P, split: str, noise_p: float | None = None, protocol: str = "paper") -> SequenceData:
+def pedestrian_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
     _pedestrian_protocol(protocol)
-    seqs = pedestrian_split(P, split, noise_p)
+    seqs = pedestrian_split(P, split, noise)
     return SequenceData(torch.from_numpy(seqs["inputs"]), torch.from_numpy(seqs["targets"]),
                         torch.from_numpy(seqs["mask"]))
 
@@ -103,8 +103,14 @@ def _pedestrian_data_key(P, protocol: str = "paper") -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------- training
-def study_data(P, study: str, split: str, noise: float | None = None, protocol: str = "paper") -> SequenceData:
-    """A split of any study (``drfkit.registry``) at a noise level (default: the training noise)."""
+def study_noise(P, study: str, noise: Noise | float | None = None) -> Noise:
+    """The ``Noise`` of ``study`` at ``noise`` (a level of the study's kind, a ``Noise`` of that kind,
+    or None for the profile's training noise)."""
+    return registry.study(study).noise(noise, P)
+
+
+def study_data(P, study: str, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
+    """A split of any study (``drfkit.registry``) under ``noise`` (``study_noise``; default: the training noise)."""
     return globals()[registry.study(study).data](P, split, noise, protocol)
 
 

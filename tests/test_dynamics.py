@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from drfkit.data.noise import Noise
 from drfkit import diagnostics, oracle
 from drfkit.data import pendulum as pend
 from drfkit.filter import kalman_predict, kalman_update
@@ -188,7 +189,7 @@ def test_blackout_summary_and_per_frame_error():
 
 
 def test_blackouts_replace_only_their_frames_with_pure_noise():
-    arrays = pend.generate_pendulum(4, 20, 0.0, seed=3)
+    arrays = pend.generate_pendulum(4, 20, Noise("rkn_uniform", 0.0), seed=3)
     dark = pend.with_blackout(arrays, 5, 9, seed=0)
     assert np.array_equal(dark["images"][:, :5], arrays["images"][:, :5])
     assert np.array_equal(dark["images"][:, 9:], arrays["images"][:, 9:])

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import torch
 
+from drfkit.data.noise import Noise
 from drfkit.filter import kalman_predict, kalman_step, kalman_update
 
 
@@ -428,7 +429,7 @@ def test_fused_step_keeps_the_committed_paper_drf_predictions():
     path = Path(f"{stem}-best.pt")
     assert path.exists(), f"the committed paper checkpoint {path} is missing"
     model = load_checkpoint(path).eval()
-    images = torch.as_tensor(generate_pendulum(4, 75, 0.75, seed=11)["images"])
+    images = torch.as_tensor(generate_pendulum(4, 75, Noise("rkn_uniform", 0.75), seed=11)["images"])
     original, fused_steps = filter_module._batched_diagonal, []
 
     def recorded(*args):

@@ -160,8 +160,8 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     served = []
 
-    def fake_data(P, split, noise_p=None, protocol="paper"):
-        served.append((split, noise_p))
+    def fake_data(P, split, noise=None, protocol="paper"):
+        served.append((split, noise))
         return val if split == "val" else test
 
     monkeypatch.setattr(studies, "pedestrian_data", fake_data)

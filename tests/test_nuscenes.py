@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 import pytest
 
+from drfkit.data.noise import Noise
 from drfkit.data import nuscenes
 from drfkit.data.nuscenes import (
     box_in_image_any,
@@ -301,9 +302,9 @@ def test_project_annotations_depth_boxes_and_tracks(fixture):
 
 def test_load_nuscenes_records(fixture):
     root, pred, _ = fixture
-    rec = load_nuscenes_records(root, pred, 0.025, version=VERSION)
+    rec = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
     assert check_records(rec) == 6  # 7 visible pedestrian boxes, B missed once
-    np.testing.assert_array_equal(rec["noise_p"], np.float32(0.025))
+    np.testing.assert_array_equal(rec["noise"], np.float32(0.025))
     by_track = {}
     for i, t in enumerate(rec["track_id"]):
         by_track.setdefault(int(t), []).append(i)
@@ -334,18 +335,18 @@ def test_other_prediction_file_names_are_accepted(tmp_path):
     facts = _nusc_write_fixture(root)
     pred = tmp_path / "pred"
     _nusc_write_predictions(pred / "nested", facts, name_style="png")
-    rec = load_nuscenes_records(root, pred, 0.05, version=VERSION)
+    rec = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.05), version=VERSION)
     assert len(rec["depth"]) == 6
 
 
 def test_clear_errors(fixture, tmp_path):
     root, pred, facts = fixture
     with pytest.raises(FileNotFoundError, match="predictions folder .*nowhere"):
-        load_nuscenes_records(root, tmp_path / "nowhere", 0.025, version=VERSION)
+        load_nuscenes_records(root, tmp_path / "nowhere", Noise("salt_and_pepper", 0.025), version=VERSION)
     first = Path(facts["images"][0][2]).name + ".predictions.json"
     (pred / first).unlink()
     with pytest.raises(ValueError, match=r"holds prediction files for 4 of the 5 keyframe images") as info:
-        load_nuscenes_records(root, pred, 0.025, version=VERSION)
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
     assert str(pred) in str(info.value)
     (root / VERSION / "scene.json").unlink()
     with pytest.raises(FileNotFoundError, match=r"nuScenes table .*scene\.json not found"):
@@ -366,17 +367,17 @@ def test_bad_prediction_files_are_rejected(fixture):
     dets[0]["keypoints"] = dets[0]["keypoints"][:50]
     path.write_text(json.dumps(dets))
     with pytest.raises(ValueError, match="51 numbers"):
-        load_nuscenes_records(root, pred, 0.025, version=VERSION)
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
     path.write_text('[{"keypoints": [NaN' + ", 0" * 50 + '], "bbox": [0, 0, 1, 1], "score": 0.5}]')
     with pytest.raises(ValueError, match="NaN"):
-        load_nuscenes_records(root, pred, 0.025, version=VERSION)
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
 
 
 def test_both_sources_give_identical_record_structures(fixture, tmp_path):
     root, pred, _ = fixture
-    real = load_pedestrians(tmp_path / "cache", "nuscenes", 0.025, nuscenes_root=root,
+    real = load_pedestrians(tmp_path / "cache", "nuscenes", Noise("salt_and_pepper", 0.025), nuscenes_root=root,
                             predictions_root=pred.parent, nuscenes_version=VERSION)
-    sim = simulate_records(simulate_truth(n_scenes=3, frames_per_scene=5, seed=0), 0.025, seed=0)
+    sim = simulate_records(simulate_truth(n_scenes=3, frames_per_scene=5, seed=0), Noise("salt_and_pepper", 0.025), seed=0)
     assert set(real) == set(sim) == set(RECORD_FIELDS)
     for name in RECORD_FIELDS:
         assert real[name].dtype == sim[name].dtype, name
@@ -487,7 +488,7 @@ def test_dangling_tokens_name_the_table(fixture):
     # Through the loader, from the files on disk.
     (root / VERSION / "scene.json").write_text(json.dumps([r for r in tables["scene"] if r["token"] != scene]))
     with pytest.raises(ValueError, match=r"no row in scene\.json"):
-        load_nuscenes_records(root, fixture[1], 0.025, version=VERSION)
+        load_nuscenes_records(root, fixture[1], Noise("salt_and_pepper", 0.025), version=VERSION)
 
 
 # ---------------------------------------------------------------- prediction files
@@ -499,12 +500,12 @@ def test_openpifpaf_0_10_file_names_and_detections(tmp_path):
         prediction_file_candidates("samples/CAM_FRONT/X.jpg"))
     root = tmp_path / "nuscenes"
     facts = _nusc_write_fixture(root)
-    reference = load_nuscenes_records(root, _write_predictions(tmp_path / "new", facts, "predictions"), 0.05,
+    reference = load_nuscenes_records(root, _write_predictions(tmp_path / "new", facts, "predictions"), Noise("salt_and_pepper", 0.05),
                                       version=VERSION)
     for style in ("pifpaf", "png.pifpaf"):
         pred = _write_predictions(tmp_path / style, facts, style)
         assert all("category_id" not in d for f in pred.glob("*.json") for d in json.loads(f.read_text()))
-        rec = load_nuscenes_records(root, pred, 0.05, version=VERSION)
+        rec = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.05), version=VERSION)
         for name in reference:
             np.testing.assert_array_equal(rec[name], reference[name], err_msg=f"{style}: {name}")
 
@@ -534,7 +535,7 @@ def test_missing_file_hint_names_what_the_workflow_writes(fixture):
     image = Path(facts["images"][0][2])
     (pred / (image.name + ".predictions.json")).unlink()
     with pytest.raises(ValueError) as info:
-        load_nuscenes_records(root, pred, 0.025, version=VERSION)
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
     message = str(info.value)
     assert f"-> expected {image.stem}.png.predictions.json" in message
     assert f"{image.name}.predictions.json" in message and f"{image.stem}.png.pifpaf.json" in message  # the others
@@ -546,15 +547,15 @@ def test_every_prediction_file_is_checked(fixture):
     back = camera_images(read_tables(root, VERSION), ("CAM_BACK",))
     for image in back:
         (pred / (Path(image["filename"]).stem + ".png.predictions.json")).write_text("[]")
-    rec = load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+    rec = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
     assert len(rec["depth"]) == 6
     broken = pred / (Path(back[2]["filename"]).stem + ".png.predictions.json")
     broken.write_text('[{"keypoints": [1, 2, 3], "bbox": [0, 0, 1, 1]}]')
     with pytest.raises(ValueError, match=rf"{broken.name}: keypoints must be 51 numbers"):
-        load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
     broken.write_text("[{not json")
     with pytest.raises(ValueError, match=rf"{broken.name} is not valid JSON"):
-        load_nuscenes_records(root, pred, 0.025, version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
+        load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION, cameras=("CAM_FRONT", "CAM_BACK"))
 
 
 def test_enlarge_boxes_is_monolocos():
@@ -582,12 +583,12 @@ def test_matching_uses_the_enlarged_box_and_records_keep_the_raw_one(fixture):
     dets[int(np.argmax(ious))] = _nusc_detection(tight)
     path.write_text(json.dumps(dets))
     depth = TRUTH[scene][name][1][k][2]
-    rec = load_nuscenes_records(root, pred, 0.025, version=VERSION)
+    rec = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION)
     assert len(rec["depth"]) == 6
     row = np.flatnonzero(np.isclose(rec["depth"], depth))
     assert len(row) == 1
     np.testing.assert_allclose(rec["box"][row[0]], tight, rtol=1e-6)
-    raw = load_nuscenes_records(root, pred, 0.025, version=VERSION, box_margin=None)
+    raw = load_nuscenes_records(root, pred, Noise("salt_and_pepper", 0.025), version=VERSION, box_margin=None)
     assert len(raw["depth"]) == 5 and not np.any(np.isclose(raw["depth"], depth))
 
 
@@ -618,7 +619,7 @@ def test_noisify_cli_writes_salt_and_pepper_images(fixture, tmp_path):
     frac, white, black = _changed_fraction(root, out, facts)
     assert abs(frac - 0.2) < 0.01  # 18000 pixels: sd 0.003
     assert white + black == round(frac * 18000) and abs(white - black) < 0.15 * (white + black)
-    again = write_noisy_images(root, tmp_path / "again", 0.2, seed=3, version=VERSION)
+    again = write_noisy_images(root, tmp_path / "again", Noise("salt_and_pepper", 0.2), seed=3, version=VERSION)
     for a in again:
         b = out / a.relative_to(tmp_path / "again")
         np.testing.assert_array_equal(cv2.imread(str(a)), cv2.imread(str(b)))  # deterministic per seed
@@ -638,4 +639,4 @@ def test_noisify_reports_missing_images(tmp_path):
     root = tmp_path / "nuscenes"
     _nusc_write_fixture(root, with_images=False)
     with pytest.raises(FileNotFoundError, match="camera image .*CAM_FRONT"):
-        write_noisy_images(root, tmp_path / "out", 0.01, version=VERSION)
+        write_noisy_images(root, tmp_path / "out", Noise("salt_and_pepper", 0.01), version=VERSION)

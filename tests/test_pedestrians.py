@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from drfkit.data.noise import Noise
 from drfkit.data.drawing import _background, draw_skeletons, render_frame
 from drfkit.data.pedestrians import load_pedestrians
 from drfkit.data.sim_detector import DetectorConfig, detect, simulate_records
@@ -24,7 +25,7 @@ def truth():
 
 @pytest.fixture(scope="module")
 def recs(truth):
-    return {p: simulate_records(truth, p, seed=5) for p in (0.0, 0.01, 0.025, 0.05)}
+    return {p: simulate_records(truth, Noise("salt_and_pepper", p), seed=5) for p in (0.0, 0.01, 0.025, 0.05)}
 
 
 def _keys(rec):
@@ -48,7 +49,7 @@ def test_default_size_is_near_the_papers():
     truth = simulate_truth()  # 165 scenes x 20 keyframes
     assert truth["n_images"][0] == 3300
     assert 3400 <= len(np.unique(truth["track_id"])) <= 4000
-    rec = simulate_records(truth, 0.01, seed=0)
+    rec = simulate_records(truth, Noise("salt_and_pepper", 0.01), seed=0)
     check_records(rec)
     assert 3400 <= len(np.unique(rec["track_id"])) <= 4000  # "about 3700 pedestrian instances"
     assert len(np.unique(rec["image_id"])) >= 3200  # nearly every image shows someone
@@ -115,10 +116,10 @@ def test_simulation_is_deterministic_and_seed_dependent():
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
     assert len(a["depth"]) != len(c["depth"]) or not np.array_equal(a["depth"], c["depth"])
-    ra, rb = simulate_records(a, 0.025, seed=9), simulate_records(b, 0.025, seed=9)
+    ra, rb = simulate_records(a, Noise("salt_and_pepper", 0.025), seed=9), simulate_records(b, Noise("salt_and_pepper", 0.025), seed=9)
     for key in ra:
         np.testing.assert_array_equal(ra[key], rb[key])
-    rc = simulate_records(a, 0.025, seed=10)
+    rc = simulate_records(a, Noise("salt_and_pepper", 0.025), seed=10)
     assert not np.array_equal(ra["keypoints"][:5], rc["keypoints"][:5])
 
 
@@ -128,7 +129,7 @@ def test_simulation_is_deterministic_and_seed_dependent():
 def test_records_pass_the_check_and_keypoints_lie_in_the_image(recs):
     for p, rec in recs.items():
         assert check_records(rec) == len(rec["depth"])
-        np.testing.assert_array_equal(rec["noise_p"], np.float32(p))
+        np.testing.assert_array_equal(rec["noise"], np.float32(p))
         kp = rec["keypoints"]
         det = kp[..., 2] > 0
         assert np.all((kp[..., 0][det] >= 0) & (kp[..., 0][det] < IMAGE_WIDTH))
@@ -193,21 +194,25 @@ def test_detector_gets_worse_with_distance(truth, recs):
 
 def test_detector_draws_gross_outliers(truth):
     cfg = DetectorConfig(outlier_base=0.2, outlier_scale=0.5)
-    rec = simulate_records(truth, 0.0, seed=1, config=cfg)
+    rec = simulate_records(truth, Noise("salt_and_pepper", 0.0), seed=1, config=cfg)
     rel, det, _ = _relative_error(truth, rec)
-    clean_rel, clean_det, _ = _relative_error(truth, simulate_records(truth, 0.0, seed=1))
+    clean_rel, clean_det, _ = _relative_error(truth, simulate_records(truth, Noise("salt_and_pepper", 0.0), seed=1))
     assert np.mean(rel[det] > 0.2) > 0.1
     assert np.mean(clean_rel[clean_det] > 0.2) < 0.03
 
 
 def test_detect_validates_inputs(truth):
     rng = np.random.default_rng(0)
-    with pytest.raises(ValueError, match="p"):
-        detect(truth, 1.5, rng)
+    with pytest.raises(ValueError, match="salt_and_pepper noise level must lie in"):
+        detect(truth, Noise("salt_and_pepper", 1.5), rng)
+    with pytest.raises(TypeError, match="takes a Noise value"):
+        detect(truth, 0.01, rng)  # a bare number: which kind?
+    with pytest.raises(ValueError, match="takes salt_and_pepper noise"):
+        detect(truth, Noise("rkn_uniform", 0.01), rng)
     with pytest.raises(TypeError, match="Generator"):
-        detect(truth, 0.01, 0)
+        detect(truth, Noise("salt_and_pepper", 0.01), 0)
     with pytest.raises(ValueError, match="keypoints_px"):
-        detect({"depth": truth["depth"]}, 0.01, rng)
+        detect({"depth": truth["depth"]}, Noise("salt_and_pepper", 0.01), rng)
 
 
 def test_detector_config_validation():
@@ -247,22 +252,22 @@ def test_simulate_truth_validates_inputs():
 
 def test_load_pedestrians_caches_by_parameters(tmp_path):
     kw = dict(n_scenes=5, frames_per_scene=8, seed=2, detector={"pixel_sigma": 1.5})
-    a = load_pedestrians(tmp_path, "simulated", 0.025, **kw)
+    a = load_pedestrians(tmp_path, "simulated", Noise("salt_and_pepper", 0.025), **kw)
     files = sorted(tmp_path.glob("pedestrians-sim-*.npz"))
     assert len(files) == 1
-    b = load_pedestrians(tmp_path, "simulated", 0.025, **kw)
+    b = load_pedestrians(tmp_path, "simulated", Noise("salt_and_pepper", 0.025), **kw)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
     truth = simulate_truth(5, 8, 2)
-    direct = simulate_records(truth, 0.025, 2, DetectorConfig(pixel_sigma=1.5))
+    direct = simulate_records(truth, Noise("salt_and_pepper", 0.025), 2, DetectorConfig(pixel_sigma=1.5))
     np.testing.assert_array_equal(a["keypoints"], direct["keypoints"])
-    load_pedestrians(tmp_path, "simulated", 0.05, **kw)
-    load_pedestrians(tmp_path, "simulated", 0.025, **{**kw, "detector": None})
+    load_pedestrians(tmp_path, "simulated", Noise("salt_and_pepper", 0.05), **kw)
+    load_pedestrians(tmp_path, "simulated", Noise("salt_and_pepper", 0.025), **{**kw, "detector": None})
     assert len(list(tmp_path.glob("pedestrians-sim-*.npz"))) == 3
     with pytest.raises(ValueError, match="source"):
-        load_pedestrians(tmp_path, "kitti", 0.01)
+        load_pedestrians(tmp_path, "kitti", Noise("salt_and_pepper", 0.01))
     with pytest.raises(ValueError, match="nuscenes_root"):
-        load_pedestrians(tmp_path, "nuscenes", 0.01)
+        load_pedestrians(tmp_path, "nuscenes", Noise("salt_and_pepper", 0.01))
 
 
 def test_render_frame_and_skeletons(truth, recs):
@@ -331,7 +336,7 @@ def _toy_records():
         "scene_id": (track == 9).astype(np.int64),
         "timestamp": time.astype(np.int64),
         "image_id": np.arange(m, dtype=np.int64),
-        "noise_p": np.full(m, 0.01, np.float32),
+        "noise": np.full(m, 0.01, np.float32),
     }
     return {k: v[perm] for k, v in rec.items()}
 
@@ -349,7 +354,7 @@ def test_record_fields_and_check_errors():
     with pytest.raises(ValueError, match="trailing shape"):
         check_records({**rec, "keypoints": rec["keypoints"][:, :, :2]})
     with pytest.raises(ValueError, match="unequal lengths"):
-        check_records({**rec, "noise_p": rec["noise_p"][:3]})
+        check_records({**rec, "noise": rec["noise"][:3]})
     with pytest.raises(ValueError, match="empty"):
         check_records({k: v[:0] for k, v in rec.items()})
     nan = rec["keypoints"].copy()

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from drfkit.data.noise import Noise
 from drfkit.data import pendulum
 from drfkit.data.pendulum import (
     check_images,
@@ -61,7 +62,7 @@ def test_transition_noise_is_on_velocity_with_std_0_1():
 
 
 def test_theta_wrapped_to_minus_pi_pi():
-    data = generate_pendulum(10, 30, 0.5, seed=11)
+    data = generate_pendulum(10, 30, Noise("rkn_uniform", 0.5), seed=11)
     assert data["theta"].min() >= -np.pi and data["theta"].max() < np.pi + 1e-6
 
 
@@ -93,7 +94,7 @@ def test_estimate_angle_recovers_the_rendered_angle():
 
 
 def test_estimate_angle_agrees_with_targets_on_generated_data():
-    data = generate_pendulum(8, 20, 0.5, seed=3)
+    data = generate_pendulum(8, 20, Noise("rkn_uniform", 0.5), seed=3)
     estimate = estimate_angle(data["clean"])
     target_angle = np.arctan2(data["targets"][..., 1], data["targets"][..., 0])
     assert np.degrees(np.abs(_wrap(estimate - target_angle))).max() < 1.0
@@ -111,7 +112,7 @@ def test_estimate_angle_black_image_is_nan_and_checks_input():
 
 
 def test_shapes_dtypes_and_targets():
-    data = generate_pendulum(4, 12, 0.5, seed=0)
+    data = generate_pendulum(4, 12, Noise("rkn_uniform", 0.5), seed=0)
     assert set(data) == {"images", "clean", "targets", "noise", "theta"}
     assert data["images"].shape == data["clean"].shape == (4, 12, 24, 24)
     assert data["images"].dtype == data["clean"].dtype == np.uint8
@@ -125,9 +126,9 @@ def test_shapes_dtypes_and_targets():
 
 
 def test_deterministic_for_a_seed_and_seed_dependent():
-    a = generate_pendulum(5, 15, 0.5, seed=1)
-    b = generate_pendulum(5, 15, 0.5, seed=1)
-    c = generate_pendulum(5, 15, 0.5, seed=2)
+    a = generate_pendulum(5, 15, Noise("rkn_uniform", 0.5), seed=1)
+    b = generate_pendulum(5, 15, Noise("rkn_uniform", 0.5), seed=1)
+    c = generate_pendulum(5, 15, Noise("rkn_uniform", 0.5), seed=2)
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
     assert not np.allclose(a["theta"], c["theta"])
@@ -135,8 +136,8 @@ def test_deterministic_for_a_seed_and_seed_dependent():
 
 
 def test_same_seed_different_max_noise_same_motion_and_factor():
-    low = generate_pendulum(6, 25, 0.5, seed=5)
-    high = generate_pendulum(6, 25, 0.75, seed=5)
+    low = generate_pendulum(6, 25, Noise("rkn_uniform", 0.5), seed=5)
+    high = generate_pendulum(6, 25, Noise("rkn_uniform", 0.75), seed=5)
     for key in ("theta", "targets", "clean"):
         np.testing.assert_array_equal(low[key], high[key])
     # Same underlying factor f: n' / max_noise = 1 - f agrees.
@@ -147,7 +148,7 @@ def test_same_seed_different_max_noise_same_motion_and_factor():
 
 def test_noise_level_range_and_clean_first_frames():
     max_noise = 0.75
-    data = generate_pendulum(20, 30, max_noise, seed=8)
+    data = generate_pendulum(20, 30, Noise("rkn_uniform", max_noise), seed=8)
     noise = data["noise"]
     assert noise.min() >= 0.0 and noise.max() <= max_noise + 1e-7
     np.testing.assert_array_equal(noise[:, :5], 0.0)
@@ -162,7 +163,7 @@ def test_noise_level_range_and_clean_first_frames():
 
 
 def test_max_noise_zero_is_clean():
-    data = generate_pendulum(3, 10, 0.0, seed=4)
+    data = generate_pendulum(3, 10, Noise("rkn_uniform", 0.0), seed=4)
     np.testing.assert_array_equal(data["images"], data["clean"])
     np.testing.assert_array_equal(data["noise"], 0.0)
 
@@ -173,16 +174,14 @@ def test_max_noise_zero_is_clean():
         (dict(n_sequences=0), "n_sequences"),
         (dict(n_sequences=2.0), "n_sequences"),
         (dict(seq_len=0), "seq_len"),
-        (dict(max_noise=1.5), "max_noise"),
-        (dict(max_noise=-0.1), "max_noise"),
-        (dict(max_noise=float("nan")), "max_noise"),
-        (dict(max_noise="0.5"), "max_noise"),
+        (dict(noise=0.5), "takes a Noise value"),
+        (dict(noise=Noise("salt_and_pepper", 0.5)), "takes rkn_uniform noise"),
         (dict(seed=-1), "seed"),
         (dict(seed=1.5), "seed"),
     ],
 )
 def test_generate_validates_arguments(kwargs, name):
-    args = dict(n_sequences=2, seq_len=3, max_noise=0.5, seed=0) | kwargs
+    args = dict(n_sequences=2, seq_len=3, noise=Noise("rkn_uniform", 0.5), seed=0) | kwargs
     with pytest.raises((ValueError, TypeError), match=name):
         generate_pendulum(**args)
 
@@ -191,7 +190,7 @@ def test_generate_validates_arguments(kwargs, name):
 
 
 def test_cache_returns_identical_arrays_without_rebuilding(tmp_path, monkeypatch):
-    first = load_pendulum(tmp_path, "train", 3, 8, 0.5, seed=0)
+    first = load_pendulum(tmp_path, "train", 3, 8, Noise("rkn_uniform", 0.5), seed=0)
     files = sorted(tmp_path.glob("pendulum-train-*.npz"))
     assert len(files) == 1
 
@@ -199,7 +198,7 @@ def test_cache_returns_identical_arrays_without_rebuilding(tmp_path, monkeypatch
         raise AssertionError("the cached file should have been used")
 
     monkeypatch.setattr(pendulum, "generate_pendulum", fail)
-    second = load_pendulum(tmp_path, "train", 3, 8, 0.5, seed=0)
+    second = load_pendulum(tmp_path, "train", 3, 8, Noise("rkn_uniform", 0.5), seed=0)
     assert set(second) == set(first)
     for key in first:
         assert second[key].dtype == first[key].dtype
@@ -207,18 +206,18 @@ def test_cache_returns_identical_arrays_without_rebuilding(tmp_path, monkeypatch
 
 
 def test_cache_key_covers_split_and_parameters(tmp_path):
-    load_pendulum(tmp_path, "train", 2, 6, 0.5, seed=0)
-    load_pendulum(tmp_path, "test", 2, 6, 0.5, seed=0)
-    load_pendulum(tmp_path, "test", 2, 6, 0.75, seed=0)
+    load_pendulum(tmp_path, "train", 2, 6, Noise("rkn_uniform", 0.5), seed=0)
+    load_pendulum(tmp_path, "test", 2, 6, Noise("rkn_uniform", 0.5), seed=0)
+    load_pendulum(tmp_path, "test", 2, 6, Noise("rkn_uniform", 0.75), seed=0)
     assert len(list(tmp_path.glob("pendulum-train-*.npz"))) == 1
     assert len(list(tmp_path.glob("pendulum-test-*.npz"))) == 2
 
 
 def test_corrupt_cache_file_is_rebuilt(tmp_path, capsys):
-    first = load_pendulum(tmp_path, "val", 2, 6, 0.5, seed=1)
+    first = load_pendulum(tmp_path, "val", 2, 6, Noise("rkn_uniform", 0.5), seed=1)
     (path,) = tmp_path.glob("pendulum-val-*.npz")
     path.write_bytes(path.read_bytes()[:100])  # truncated, as after a killed write
-    again = load_pendulum(tmp_path, "val", 2, 6, 0.5, seed=1)
+    again = load_pendulum(tmp_path, "val", 2, 6, Noise("rkn_uniform", 0.5), seed=1)
     for key in first:
         np.testing.assert_array_equal(again[key], first[key])
     assert "rebuilding" in capsys.readouterr().err
@@ -229,13 +228,31 @@ def test_corrupt_cache_file_is_rebuilt(tmp_path, capsys):
 @pytest.mark.parametrize("split", ["", "a/b", 3])
 def test_load_rejects_bad_split(tmp_path, split):
     with pytest.raises(ValueError, match="split"):
-        load_pendulum(tmp_path, split, 2, 6, 0.5, seed=0)
+        load_pendulum(tmp_path, split, 2, 6, Noise("rkn_uniform", 0.5), seed=0)
 
 
 def test_load_validates_before_touching_disk(tmp_path):
-    with pytest.raises(ValueError, match="max_noise"):
-        load_pendulum(tmp_path, "train", 2, 6, 2.0, seed=0)
+    with pytest.raises(TypeError, match="takes a Noise value"):
+        load_pendulum(tmp_path, "train", 2, 6, 0.5, seed=0)
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("kind, level, error", [
+    ("rkn_uniform", 1.5, "must lie in"), ("rkn_uniform", -0.1, "must lie in"),
+    ("rkn_uniform", float("nan"), "must lie in"), ("rkn_uniform", "0.5", "is a number"),
+    ("rkn_uniform", True, "is a number"), ("gaussian", 0.1, "unknown noise kind"),
+])
+def test_noise_is_checked_when_made(kind, level, error):
+    with pytest.raises((ValueError, TypeError), match=error):
+        Noise(kind, level)
+
+
+def test_noise_kind_is_in_the_cache_key(tmp_path):
+    from drfkit.io import param_hash
+
+    assert Noise("rkn_uniform", 0.5).key() != Noise("salt_and_pepper", 0.5).key()
+    assert Noise("rkn_uniform", 1) == Noise("rkn_uniform", 1.0) and isinstance(Noise("rkn_uniform", 1).level, float)
+    assert param_hash({"noise": Noise("rkn_uniform", 0.5).key()}) != param_hash({"noise": Noise("salt_and_pepper", 0.5).key()})
 
 
 # ---------------------------------------------------------------- check_images

@@ -73,6 +73,7 @@ def test_every_registered_study_is_wired_end_to_end():
     from drfkit import studies
     from drfkit.models import MODEL_CLASSES
     from drfkit.params import NOTEBOOKS, SPECS
+    from drfkit.data.noise import NOISE_KINDS, Noise
     from drfkit.registry import STUDIES
 
     for name, s in STUDIES.items():
@@ -83,3 +84,4 @@ def test_every_registered_study_is_wired_end_to_end():
         assert all(k in NOTEBOOKS[s.training_notebook] for k in (s.models_key, s.train_level_key)), name
         assert set(s.kinds) <= set(MODEL_CLASSES), name
         assert studies.TRAINING_NOTEBOOK[name] == s.training_notebook
+        assert s.noise_kind in NOISE_KINDS and s.noise(0.1) == Noise(s.noise_kind, 0.1), name

@@ -114,3 +114,14 @@ def test_cli_trains_the_book_protocol_under_its_own_names_and_reports_a_held_loc
     err = capsys.readouterr().err
     assert "is being written by process" in err and "Traceback" not in err
     assert not paper.with_name(paper.name + "-last.pt").exists()
+
+
+def test_a_study_takes_its_own_noise_kind_or_a_level(tiny_profile):
+    from drfkit.data.noise import Noise
+
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
+    assert studies.study_noise(P, "pendulum") == Noise("rkn_uniform", P.pend_train_max_noise)
+    assert studies.study_noise(P, "pendulum", 0.75) == Noise("rkn_uniform", 0.75)
+    assert studies.study_noise(P, "pedestrians", Noise("salt_and_pepper", 0.05)).level == 0.05
+    with pytest.raises(ValueError, match="takes salt_and_pepper noise"):
+        studies.study_noise(P, "pedestrians", Noise("rkn_uniform", 0.05))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from drfkit.data.noise import Noise
 from drfkit.data.pendulum import generate_pendulum
 from drfkit.io import CorruptArtefactError, torch_load_checked
 from drfkit.paths import REPO_ROOT
@@ -21,7 +22,7 @@ CONFIG_KIND = "drf"
 
 
 def tiny_data():
-    arrays = generate_pendulum(12, 10, 0.5, seed=3)
+    arrays = generate_pendulum(12, 10, Noise("rkn_uniform", 0.5), seed=3)
     images, targets = torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"])
     return SequenceData(images[:8], targets[:8]), SequenceData(images[8:], targets[8:])
 

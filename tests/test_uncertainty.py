@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from drfkit.data.noise import Noise
 from drfkit.models import build_model, default_config
 from drfkit.uncertainty import Prediction, intervals, predict, summarise_samples
 
@@ -245,7 +246,7 @@ def test_compare_prediction_modes_deterministic_has_no_epistemic_part():
     from drfkit.train import SequenceData
     from drfkit.uncertainty import predict
 
-    arrays = generate_pendulum(3, 7, 0.5, seed=1)
+    arrays = generate_pendulum(3, 7, Noise("rkn_uniform", 0.5), seed=1)
     data = SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
     torch.manual_seed(0)
     model = build_model(default_config("no_dynamics", "pendulum", 2)).eval()

@@ -19,10 +19,59 @@ Pedestrians (the DRF paper)
 ``salt_and_pepper``: every pixel is independently replaced, with probability p, by
 black (0) or white (255), half each; a colour pixel is replaced in all its channels.
 The paper trains with p = 0.01 and evaluates at 0.025 and 0.05.
+
+One value for both: ``Noise(kind, level)``
+-----------------------------------------
+A noise setting is one value everywhere in the book: ``Noise("rkn_uniform", 0.5)`` (the pendulum's
+max noise) or ``Noise("salt_and_pepper", 0.025)`` (the pedestrians' p). The data layer takes it
+and hashes ``noise.key()`` into its cache names, so two kinds at the same level never share a
+file; each study names its kind in ``drfkit.registry`` (``Study.noise(level)``).
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
+
+# kind -> what its level means
+NOISE_KINDS = {
+    "rkn_uniform": "max noise of the RKN pendulum blend with uniform pixel noise (0 clean, 1 the benchmark)",
+    "salt_and_pepper": "probability that a pixel is replaced by black or white",
+}
+
+
+@dataclass(frozen=True)
+class Noise:
+    """A kind of image corruption and its level in [0, 1] (``NOISE_KINDS`` says what the level means)."""
+    kind: str
+    level: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in NOISE_KINDS:
+            raise ValueError(f"unknown noise kind {self.kind!r}; known kinds: {sorted(NOISE_KINDS)}")
+        level = self.level
+        if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)):
+            raise TypeError(f"a noise level is a number in [0, 1] ({NOISE_KINDS[self.kind]}), got {level!r}")
+        if not (math.isfinite(float(level)) and 0.0 <= float(level) <= 1.0):
+            raise ValueError(f"a {self.kind} noise level must lie in [0, 1] ({NOISE_KINDS[self.kind]}), got {level}")
+        object.__setattr__(self, "level", float(level))
+
+    def key(self) -> dict[str, object]:
+        """What names this noise in cache hashes."""
+        return {"kind": self.kind, "level": self.level}
+
+    def __str__(self) -> str:
+        return f"{self.kind} {self.level:g}"
+
+
+def check_noise(noise, kind: str, where: str) -> Noise:
+    """``noise`` if it is a ``Noise`` of ``kind``, else a clear error naming ``where``."""
+    if not isinstance(noise, Noise):
+        raise TypeError(f"{where} takes a Noise value, e.g. Noise({kind!r}, 0.5), got {noise!r}")
+    if noise.kind != kind:
+        raise ValueError(f"{where} takes {kind} noise ({NOISE_KINDS[kind]}), got {noise}")
+    return noise
 
 # Benchmark constants (the RKN pendulum benchmark, Becker et al. 2019).
 RANDOM_WALK_STEP = 0.2  # f_{t+1} = clip(f_t + U(-0.2, 0.2), 0, 1)

@@ -16,7 +16,7 @@ Pipeline for one noise level p
    folder as a file name), then ``python -m openpifpaf.predict NOISY/samples/CAM_FRONT/*.png
    --json-output predictions/p0.025`` (one ``<image file name>.predictions.json`` per image,
    here ``X.png.predictions.json``).
-3. ``load_nuscenes_records(R, 'predictions/p0.025', 0.025)``.
+3. ``load_nuscenes_records(R, 'predictions/p0.025', Noise('salt_and_pepper', 0.025))``.
 
 Choices (the paper is silent), and where they differ from Monoloco's nuScenes preparation
 -----------------------------------------------------------------------------------------
@@ -69,6 +69,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from drfkit.data.noise import Noise, check_noise
 from drfkit.data.records import N_KEYPOINTS, check_records
 from drfkit.io import atomic_write_bytes
 
@@ -430,13 +431,13 @@ def _index_prediction_files(predictions_dir: Path) -> dict[str, Path]:
 def load_nuscenes_records(
     root: str | os.PathLike,
     predictions_dir: str | os.PathLike,
-    noise_p: float,
+    noise: Noise,
     version: str = "v1.0-mini",
     cameras: Iterable[str] = DEFAULT_CAMERAS,
     min_iou: float = MIN_IOU,
     box_margin: tuple[float, float] | None = MONOLOCO_BOX_MARGIN,
 ) -> dict[str, np.ndarray]:
-    """Pedestrian records (``drfkit.data.records``) from nuScenes + PifPaf at noise level noise_p.
+    """Pedestrian records (``drfkit.data.records``) from nuScenes + PifPaf at salt-and-pepper ``noise``.
 
     Every keyframe image of ``cameras`` must have a prediction file in ``predictions_dir``
     (names: ``prediction_file_candidates``), and every one of them is read and checked (also
@@ -446,13 +447,12 @@ def load_nuscenes_records(
     sorted by (scene_id, track_id, timestamp); position/depth/distance come from the
     annotation, box (PifPaf's raw box) and keypoints from PifPaf.
     """
-    if not 0 <= float(noise_p) <= 1:
-        raise ValueError(f"noise_p must lie in [0, 1], got {noise_p}")
+    p = check_noise(noise, "salt_and_pepper", "the nuScenes reader").level
     predictions_dir = Path(predictions_dir)
     if not predictions_dir.is_dir():
         raise FileNotFoundError(
             f"PifPaf predictions folder {predictions_dir} not found; write noisy images with "
-            f"`python -m drfkit.data.nuscenes noisify --p {noise_p:g}`, then `mkdir -p {predictions_dir}` "
+            f"`python -m drfkit.data.nuscenes noisify --p {p:g}`, then `mkdir -p {predictions_dir}` "
             f"(openpifpaf takes a missing folder as a file name) and run "
             f"`python -m openpifpaf.predict ... --json-output {predictions_dir}` on them"
         )
@@ -508,7 +508,7 @@ def load_nuscenes_records(
         "scene_id": gt["scene_id"][g_idx].astype(np.int64),
         "timestamp": gt["timestamp"][g_idx].astype(np.int64),
         "image_id": gt["image_id"][g_idx].astype(np.int64),
-        "noise_p": np.full(len(rows), noise_p, dtype=np.float32),
+        "noise": np.full(len(rows), p, dtype=np.float32),
     }
     check_records(rec)
     return rec
@@ -518,13 +518,13 @@ def load_nuscenes_records(
 def write_noisy_images(
     root: str | os.PathLike,
     out_dir: str | os.PathLike,
-    p: float,
+    noise: Noise,
     seed: int = 0,
     version: str = "v1.0-mini",
     cameras: Iterable[str] = DEFAULT_CAMERAS,
     image_format: str = "png",
 ) -> list[Path]:
-    """Write salt-and-pepper copies (probability p) of the keyframe images of ``cameras``.
+    """Write copies of the keyframe images of ``cameras`` under salt-and-pepper ``noise``.
 
     Each image ``<root>/<filename>`` goes to ``<out_dir>/<filename>`` with the suffix
     replaced by ``.png`` (image_format='png', lossless: the noise is exact) or kept
@@ -536,6 +536,7 @@ def write_noisy_images(
 
     from drfkit.data.noise import salt_and_pepper
 
+    p = check_noise(noise, "salt_and_pepper", "write_noisy_images").level
     if image_format not in ("png", "jpg"):
         raise ValueError(f"image_format must be 'png' (lossless) or 'jpg', got {image_format!r}")
     tables = read_tables(root, version)
@@ -547,7 +548,7 @@ def write_noisy_images(
         if pixels is None:
             raise FileNotFoundError(f"camera image {src} is missing or unreadable; download the nuScenes 'samples' blobs")
         rng = np.random.default_rng([seed, zlib.crc32(image["filename"].encode())])
-        noisy = salt_and_pepper(pixels, float(p), rng, channels_last=True)
+        noisy = salt_and_pepper(pixels, p, rng, channels_last=True)
         rel = Path(image["filename"])
         dst = Path(out_dir) / (rel.with_suffix(".png") if image_format == "png" else rel)
         dst.parent.mkdir(parents=True, exist_ok=True)
@@ -573,7 +574,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     noisify.add_argument("--cameras", nargs="+", default=list(DEFAULT_CAMERAS), choices=ALL_CAMERAS)
     noisify.add_argument("--format", default="png", choices=("png", "jpg"), dest="image_format")
     args = parser.parse_args(argv)
-    written = write_noisy_images(args.root, args.out, args.p, args.seed, args.version, args.cameras, args.image_format)
+    written = write_noisy_images(args.root, args.out, Noise("salt_and_pepper", args.p), args.seed, args.version, args.cameras, args.image_format)
     print(f"wrote {len(written)} noisy images (p = {args.p:g}) under {args.out}")
     return 0
 

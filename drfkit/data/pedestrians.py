@@ -20,6 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from drfkit.data.noise import Noise, check_noise
 from drfkit.data.records import check_records
 from drfkit.data.sim_detector import DetectorConfig, simulate_records
 from drfkit.data.sim_world import simulate_truth
@@ -28,15 +29,15 @@ from drfkit.data.sim_world import simulate_truth
 SIMULATOR_VERSION = 1
 
 
-def noise_dir_name(noise_p: float) -> str:
-    """Folder name of one noise level's PifPaf predictions: 'p0.025' for 0.025 (``f'p{p:g}'``)."""
-    return f"p{float(noise_p):g}"
+def noise_dir_name(noise: Noise) -> str:
+    """Folder name of one noise level's PifPaf predictions: 'p0.025' for salt-and-pepper 0.025."""
+    return f"p{check_noise(noise, 'salt_and_pepper', 'noise_dir_name').level:g}"
 
 
 def load_pedestrians(
     cache_dir: str | os.PathLike,
     source: str,
-    noise_p: float,
+    noise: Noise,
     *,
     n_scenes: int = 165,
     frames_per_scene: int = 20,
@@ -48,33 +49,32 @@ def load_pedestrians(
     cameras: tuple[str, ...] | None = None,
     simulation: Mapping[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Pedestrian records at salt-and-pepper probability ``noise_p`` from either source.
+    """Pedestrian records under salt-and-pepper ``noise`` from either source.
 
     source='simulated': ``simulate_truth(n_scenes, frames_per_scene, seed, **simulation)``
-    observed by ``simulate_records(truth, noise_p, seed, detector)``, cached as
+    observed by ``simulate_records(truth, noise, seed, detector)``, cached as
     ``<cache_dir>/pedestrians-sim-<hash>.npz`` with every parameter in the hash.
     source='nuscenes': ``drfkit.data.nuscenes.load_nuscenes_records`` reading the tables
-    under ``nuscenes_root`` and PifPaf predictions from ``<predictions_root>/p<noise_p>/``
+    under ``nuscenes_root`` and PifPaf predictions from ``<predictions_root>/p<level>/``
     (``noise_dir_name``, e.g. ``p0.025``); the simulation arguments are ignored, and
     nothing is cached (the files on disk are the source of truth).
     Both return records that pass ``check_records``.
     """
     from drfkit.io import cached_npz
 
+    check_noise(noise, "salt_and_pepper", "the pedestrian data")
     if source == "simulated":
         detector = DetectorConfig.from_dict(detector)
         simulation = dict(simulation or {})
-        if not isinstance(noise_p, (int, float, np.integer, np.floating)) or not 0 <= noise_p <= 1:
-            raise ValueError(f"noise_p must be a number in [0, 1], got {noise_p!r}")
         params = {
-            "source": source, "noise_p": float(noise_p), "n_scenes": n_scenes,
+            "source": source, "noise": noise.key(), "n_scenes": n_scenes,
             "frames_per_scene": frames_per_scene, "seed": seed, "detector": detector.to_dict(),
             "simulation": simulation, "simulator_version": SIMULATOR_VERSION,
         }
 
         def build() -> dict[str, np.ndarray]:
             truth = simulate_truth(n_scenes, frames_per_scene, seed, **simulation)
-            return simulate_records(truth, float(noise_p), seed, detector)
+            return simulate_records(truth, noise, seed, detector)
 
         rec = cached_npz(cache_dir, "pedestrians-sim", params, build)
     elif source == "nuscenes":
@@ -89,7 +89,7 @@ def load_pedestrians(
         from pathlib import Path
 
         rec = nuscenes.load_nuscenes_records(
-            nuscenes_root, Path(predictions_root) / noise_dir_name(noise_p), noise_p,
+            nuscenes_root, Path(predictions_root) / noise_dir_name(noise), noise,
             version=nuscenes_version, cameras=tuple(cameras or nuscenes.DEFAULT_CAMERAS),
         )
     else:

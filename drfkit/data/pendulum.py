@@ -46,7 +46,7 @@ import re
 import cv2
 import numpy as np
 
-from drfkit.data.noise import blend_uniform_noise, rkn_noise_factors
+from drfkit.data.noise import Noise, blend_uniform_noise, check_noise, rkn_noise_factors
 from drfkit.io import cached_npz
 
 # Physics (the benchmark's values).
@@ -72,8 +72,9 @@ GENERATOR_VERSION = 1
 _NOISE_CHUNK = 256  # sequences blended at once (bounds the memory of the pixel noise)
 
 
-def generate_pendulum(n_sequences: int, seq_len: int, max_noise: float, seed: int) -> dict[str, np.ndarray]:
-    """Simulate, render and corrupt ``n_sequences`` pendulum sequences of ``seq_len`` frames.
+def generate_pendulum(n_sequences: int, seq_len: int, noise: Noise, seed: int) -> dict[str, np.ndarray]:
+    """Simulate, render and corrupt ``n_sequences`` pendulum sequences of ``seq_len`` frames at
+    ``noise`` = ``Noise("rkn_uniform", max_noise)``.
 
     Returns a dict of arrays:
       'images'  uint8 (N, T, 24, 24)  noisy observations
@@ -87,7 +88,7 @@ def generate_pendulum(n_sequences: int, seq_len: int, max_noise: float, seed: in
     different ``max_noise`` gives the same motions, clean images and f; only the
     rescaling n' = max_noise * (1 - f) and hence the noisy images differ.
     """
-    _check_generation_args(n_sequences, seq_len, max_noise, seed)
+    max_noise = _check_generation_args(n_sequences, seq_len, noise, seed)
     physics_rng, factor_rng, pixel_rng = (
         np.random.default_rng(child) for child in np.random.SeedSequence(seed).spawn(3)
     )
@@ -97,18 +98,18 @@ def generate_pendulum(n_sequences: int, seq_len: int, max_noise: float, seed: in
     clean = render_pendulum(theta)
 
     factors = rkn_noise_factors(n_sequences, seq_len, factor_rng)
-    noise = (float(max_noise) * (1.0 - factors)).astype(np.float32)
+    levels = (max_noise * (1.0 - factors)).astype(np.float32)
     images = np.empty_like(clean)
     for start in range(0, n_sequences, _NOISE_CHUNK):
         chunk = slice(start, start + _NOISE_CHUNK)
-        images[chunk] = blend_uniform_noise(clean[chunk], noise[chunk], pixel_rng)
+        images[chunk] = blend_uniform_noise(clean[chunk], levels[chunk], pixel_rng)
 
     targets = np.stack([np.cos(theta), np.sin(theta)], axis=-1).astype(np.float32)
     return {
         "images": images,
         "clean": clean,
         "targets": targets,
-        "noise": noise,
+        "noise": levels,
         "theta": theta.astype(np.float32),
     }
 
@@ -118,7 +119,7 @@ def load_pendulum(
     split: str,
     n_sequences: int,
     seq_len: int,
-    max_noise: float,
+    noise: Noise,
     seed: int,
 ) -> dict[str, np.ndarray]:
     """``generate_pendulum`` cached as ``<cache_dir>/pendulum-<split>-<hash>.npz``.
@@ -129,12 +130,12 @@ def load_pendulum(
     """
     if not isinstance(split, str) or not re.fullmatch(r"[A-Za-z0-9_.\-]+", split):
         raise ValueError(f"split must be a non-empty name of letters, digits, '_', '-', '.', got {split!r}")
-    _check_generation_args(n_sequences, seq_len, max_noise, seed)
+    _check_generation_args(n_sequences, seq_len, noise, seed)
     params = {
         "split": split,
         "n_sequences": int(n_sequences),
         "seq_len": int(seq_len),
-        "max_noise": float(max_noise),
+        "noise": noise.key(),
         "seed": int(seed),
         "generator_version": GENERATOR_VERSION,
     }
@@ -142,7 +143,7 @@ def load_pendulum(
         cache_dir,
         f"pendulum-{split}",
         params,
-        lambda: generate_pendulum(n_sequences, seq_len, max_noise, seed),
+        lambda: generate_pendulum(n_sequences, seq_len, noise, seed),
     )
 
 
@@ -263,20 +264,19 @@ def _simulate(
     return phis - np.pi, vels
 
 
-def _check_generation_args(n_sequences, seq_len, max_noise, seed) -> None:
+def _check_generation_args(n_sequences, seq_len, noise, seed) -> float:
+    """The max noise of ``noise`` (an rkn_uniform ``Noise``) once every argument is checked."""
     for name, value in (("n_sequences", n_sequences), ("seq_len", seq_len)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             raise TypeError(f"{name} must be an integer, got {value!r}")
         if value < 1:
             raise ValueError(f"{name} must be >= 1, got {value}")
-    if isinstance(max_noise, bool) or not isinstance(max_noise, (int, float, np.integer, np.floating)):
-        raise TypeError(f"max_noise must be a number in [0, 1], got {max_noise!r}")
-    if not 0.0 <= float(max_noise) <= 1.0:  # also rejects NaN
-        raise ValueError(f"max_noise must lie in [0, 1] (0 = clean, 1 = the RKN benchmark), got {max_noise}")
+    check_noise(noise, "rkn_uniform", "the pendulum generator")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
     if seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed}")
+    return noise.level
 
 
 # Frames of the blackout test: 15 frames of pure noise in the middle of a 75-frame sequence,

@@ -18,7 +18,7 @@ track_id        int64      ()              one pedestrian seen by one camera
 scene_id        int64      ()              scene (never split across train/val/test)
 timestamp       int64      ()              microseconds
 image_id        int64      ()              camera image the detection came from
-noise_p         float32    ()              salt-and-pepper probability of that image
+noise           float32    ()              noise level of that image (salt-and-pepper p)
 ==============  =========  ==============  ================================================
 
 Extra fields are allowed (they must have length M too) and travel through
@@ -49,7 +49,7 @@ RECORD_FIELDS: dict[str, tuple[type, tuple[int, ...]]] = {
     "scene_id": (np.int64, ()),
     "timestamp": (np.int64, ()),
     "image_id": (np.int64, ()),
-    "noise_p": (np.float32, ()),
+    "noise": (np.float32, ()),
 }
 
 # COCO keypoint names, in the order PifPaf writes them.
@@ -67,7 +67,7 @@ def check_records(rec: Mapping[str, np.ndarray]) -> int:
     Checks: every field of ``RECORD_FIELDS`` present with its dtype and trailing shape,
     all arrays (extra fields included) of the same length M >= 1, keypoints and the other
     float fields finite, confidences in [0, 1], depth == position z, distance ==
-    ||position||, noise_p in [0, 1].
+    ||position||, noise in [0, 1].
     """
     if not isinstance(rec, Mapping):
         raise TypeError(f"records must be a dict of numpy arrays, got {type(rec).__name__}")
@@ -113,9 +113,9 @@ def check_records(rec: Mapping[str, np.ndarray]) -> int:
         raise ValueError("records field 'depth' must equal position z (column 2 of 'position')")
     if not np.allclose(rec["distance"], np.linalg.norm(rec["position"], axis=1), rtol=1e-5, atol=1e-4):
         raise ValueError("records field 'distance' must equal ||position||")
-    noise = rec["noise_p"]
+    noise = rec["noise"]
     if np.any((noise < 0) | (noise > 1)):
-        raise ValueError("records field 'noise_p' must lie in [0, 1]")
+        raise ValueError("records field 'noise' must lie in [0, 1]")
     return m
 
 
@@ -128,7 +128,7 @@ def concatenate(parts: list[Mapping[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """Concatenate records with the same fields (e.g. the same people at several noise levels).
 
     The ids are not renumbered: concatenating two noise levels of the same simulation keeps
-    the shared track ids, so use ``noise_p`` (or separate calls) to tell them apart.
+    the shared track ids, so use ``noise`` (or separate calls) to tell them apart.
     """
     if not parts:
         raise ValueError("concatenate needs at least one records dict")
@@ -242,7 +242,7 @@ def make_sequences(
       'inputs' float32 (N, S, 17, 3) normalised keypoints (``normalise_keypoints``),
       'targets' float32 (N, S, 1) depth, 'distance' float32 (N, S), 'mask' bool (N, S),
       'timestamp' int64 (N, S), 'record_index' int64 (N, S) row of ``rec`` (padding repeats
-      the last valid row), 'track_id' int64 (N,), 'scene_id' int64 (N,), 'noise_p' float32 (N,).
+      the last valid row), 'track_id' int64 (N,), 'scene_id' int64 (N,), 'noise' float32 (N,).
     """
     check_records(rec)
     if isinstance(seq_len, bool) or not isinstance(seq_len, (int, np.integer)) or seq_len < 1:
@@ -297,5 +297,5 @@ def make_sequences(
         "record_index": rows.astype(np.int64),
         "track_id": rec["track_id"][first],
         "scene_id": rec["scene_id"][first],
-        "noise_p": rec["noise_p"][first],
+        "noise": rec["noise"][first],
     }

@@ -4,7 +4,7 @@
 pixels: it perturbs the true projected keypoints with errors that grow with the noise
 probability p and with distance (people small in pixels suffer more), see ``detect``.
 
-Coupling across noise levels: ``simulate_records(truth, p, seed, config)`` draws every
+Coupling across noise levels: ``simulate_records(truth, noise, seed, config)`` draws every
 random number with shapes that do not depend on p, from a generator seeded by ``seed``
 alone, and p only scales them. The same seed at p = 0.01, 0.025, 0.05 therefore observes the
 same people with the same "luck": each keypoint's Gaussian error grows monotonically with p,
@@ -20,6 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from drfkit.data.noise import Noise, check_noise
 from drfkit.data.records import N_KEYPOINTS, check_records
 from drfkit.data.sim_world import IMAGE_HEIGHT, IMAGE_WIDTH, check_int
 
@@ -110,11 +111,11 @@ class DetectorConfig:
 
 def detect(
     truth: Mapping[str, np.ndarray],
-    p: float,
+    noise: Noise,
     rng: np.random.Generator,
     config: DetectorConfig | None = None,
 ) -> dict[str, np.ndarray]:
-    """Simulated PifPaf on images with salt-and-pepper probability p: truth -> records.
+    """Simulated PifPaf on images with salt-and-pepper ``noise`` (probability p): truth -> records.
 
     **A stand-in for PifPaf on noisy images**, not an image model. For each true
     pedestrian-keyframe (rows of ``simulate_truth``), with r = ref_height_px / height_px:
@@ -133,11 +134,10 @@ def detect(
     grown by ``box_margin``. The random draws have shapes independent of p and p only scales
     them, so one generator state gives coupled observations across noise levels.
 
-    Returns records (``drfkit.data.records``) of the detected rows, noise_p = p.
+    Returns records (``drfkit.data.records``) of the detected rows, noise = p.
     """
     config = DetectorConfig() if config is None else DetectorConfig.from_dict(config)
-    if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)) or not 0 <= p <= 1:
-        raise ValueError(f"p (salt-and-pepper probability) must be a number in [0, 1], got {p!r}")
+    p = check_noise(noise, "salt_and_pepper", "the simulated detector").level
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy Generator (np.random.default_rng(seed)), got {type(rng).__name__}")
     for name in ("keypoints_px", "in_image", "height_px", "position", "intrinsics", "track_id"):
@@ -158,8 +158,8 @@ def detect(
 
     h_px = truth["height_px"].astype(np.float64)[:, None]  # (M,1)
     r = c.ref_height_px / np.maximum(h_px, 1e-6)
-    noise = p * (1.0 + r)
-    sigma = c.pixel_sigma + h_px * (c.rel_sigma + c.noise_sigma_gain * noise)  # (M,1)
+    strain = p * (1.0 + r)  # how hard the noise hits a person of this size
+    sigma = c.pixel_sigma + h_px * (c.rel_sigma + c.noise_sigma_gain * strain)  # (M,1)
     uv = true_px + sigma[..., None] * z_xy
     outlier = u_out < (c.outlier_base + c.outlier_noise_gain * p)
     offset = (h_px * c.outlier_scale)[..., None] * out_mag[..., None] * np.stack(
@@ -168,14 +168,14 @@ def detect(
     uv[..., 0] = np.clip(uv[..., 0], 0.0, IMAGE_WIDTH - 1.0)
     uv[..., 1] = np.clip(uv[..., 1], 0.0, IMAGE_HEIGHT - 1.0)
 
-    p_miss = np.minimum(c.miss_base + c.miss_far * r + c.miss_noise_gain * noise, c.miss_max)
+    p_miss = np.minimum(c.miss_base + c.miss_far * r + c.miss_noise_gain * strain, c.miss_max)
     detected = (u_miss >= p_miss) & truth["in_image"]
-    conf = c.conf_base - c.conf_far * r - c.conf_noise_gain * noise + c.conf_sd * z_conf \
+    conf = c.conf_base - c.conf_far * r - c.conf_noise_gain * strain + c.conf_sd * z_conf \
         - c.conf_error_drop * np.sum(z_xy**2, axis=-1)
     conf = np.clip(conf, c.conf_min, 1.0)
     keypoints = np.where(detected[..., None], np.concatenate([uv, conf[..., None]], axis=-1), 0.0)
 
-    p_det_miss = np.minimum(c.det_miss_base + c.det_miss_far * r[:, 0] + c.det_miss_noise_gain * noise[:, 0],
+    p_det_miss = np.minimum(c.det_miss_base + c.det_miss_far * r[:, 0] + c.det_miss_noise_gain * strain[:, 0],
                             c.det_miss_max)
     keep = (u_det >= p_det_miss) & (detected.sum(axis=1) >= c.min_keypoints)
 
@@ -199,7 +199,7 @@ def detect(
         "scene_id": truth["scene_id"][keep].astype(np.int64),
         "timestamp": truth["timestamp"][keep].astype(np.int64),
         "image_id": truth["image_id"][keep].astype(np.int64),
-        "noise_p": np.full(int(keep.sum()), p, dtype=np.float32),
+        "noise": np.full(int(keep.sum()), p, dtype=np.float32),
     }
     check_records(rec)
     return rec
@@ -207,15 +207,15 @@ def detect(
 
 def simulate_records(
     truth: Mapping[str, np.ndarray],
-    p: float,
+    noise: Noise,
     seed: int = 0,
     config: DetectorConfig | Mapping[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Observe the simulated people at salt-and-pepper probability p (see ``detect``).
+    """Observe the simulated people under salt-and-pepper ``noise`` (see ``detect``).
 
     The detector's generator depends on ``seed`` only, so calls with the same truth and seed
-    at different p see the same people with coupled detector randomness.
+    at different levels see the same people with coupled detector randomness.
     """
     check_int(seed, "seed", 0)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 11]))
-    return detect(truth, p, rng, DetectorConfig.from_dict(config))
+    return detect(truth, noise, rng, DetectorConfig.from_dict(config))
