@@ -137,14 +137,14 @@ def c3_pedestrian_ood_gain(by_seed: pd.DataFrame, ood_levels=(0.025, 0.05)) -> d
 
 
 # ------------------------------------------------------------------------------ C4
-def c4_in_distribution_parity(mae: pd.DataFrame, level: float = 0.01) -> dict[str, Any]:
-    d, m = _cell(mae, "drf", "mae", noise=level), _cell(mae, "monoloco", "mae", noise=level)
+def c4_in_distribution_parity(mae: pd.DataFrame, noise: float = 0.01) -> dict[str, Any]:
+    d, m = _cell(mae, "drf", "mae", noise=noise), _cell(mae, "monoloco", "mae", noise=noise)
     rel = abs(d - m) / m
     verdict = REPRODUCED if rel <= 0.10 or d < m else PARTLY if rel <= 0.25 else NOT
     return {"id": "C4", "claim": "Pedestrians in distribution (p 0.01): DRF comparable to Monoloco",
             "paper": "2.56 m vs 2.56 m",
-            "ours": f"DRF {_fmt(mae, 'drf', 'mae', 3, noise=level)} m vs Monoloco "
-                    f"{_fmt(mae, 'monoloco', 'mae', 3, noise=level)} m ({100 * (d - m) / m:+.1f}%)",
+            "ours": f"DRF {_fmt(mae, 'drf', 'mae', 3, noise=noise)} m vs Monoloco "
+                    f"{_fmt(mae, 'monoloco', 'mae', 3, noise=noise)} m ({100 * (d - m) / m:+.1f}%)",
             "rule": "reproduced: DRF's MAE within 10 % of Monoloco's or lower; partly: within 25 %; "
                     "else not reproduced",
             "verdict": verdict}
@@ -227,7 +227,7 @@ def c7_gating(table: pd.DataFrame, study: str) -> dict[str, Any]:
 # Not claims the paper states but the premise of its method: a recursive filter inside the network
 # is only "a filter" if its gain follows observation quality, its transition predicts and its state
 # coasts through missing observations. The book checks them before reading the claims above.
-def f1_filter_mechanism(mechanism: pd.DataFrame, level: float) -> dict[str, Any]:
+def f1_filter_mechanism(mechanism: pd.DataFrame, noise: float) -> dict[str, Any]:
     """mechanism: ``drfkit.dynamics.mechanism_table`` rows of the DRF (one per seed)."""
     drf = mechanism[mechanism["model"] == "drf"]
     rho, ratio, prior = (float(drf[c].mean()) for c in ("r_noise_spearman", "gain_ratio_blackout", "prior_ratio"))
@@ -236,7 +236,7 @@ def f1_filter_mechanism(mechanism: pd.DataFrame, level: float) -> dict[str, Any]
     return {"id": "F1", "claim": "The DRF's filter filters: r follows frame quality, the gain drops on pure noise, "
                                  "F predicts the next observation",
             "paper": "implied by the method (Kalman update on a learned latent state)",
-            "ours": f"rank corr(r, noise) {rho:.2f} at max noise {level:g}; gain pure/clean {ratio:.2f} on the blackout; "
+            "ours": f"rank corr(r, noise) {rho:.2f} at max noise {noise:g}; gain pure/clean {ratio:.2f} on the blackout; "
                     f"‖Fz − w‖/‖z − w‖ {prior:.2f} (seed means)",
             "rule": "reproduced: rank correlation >= 0.8, gain ratio <= 0.25 and prediction ratio < 1; partly: at "
                     "least one of the three; else not reproduced",

@@ -45,13 +45,13 @@ def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return pred.mean.numpy(), pred.total.numpy()
 
 
-def mechanism_table(P, models: dict[tuple[str, int], Any], level: float, split: str = "test") -> pd.DataFrame:
-    """One row per (model, seed): diagnostics on ``split`` at max noise ``level`` and the
+def mechanism_table(P, models: dict[tuple[str, int], Any], noise: float, split: str = "test") -> pd.DataFrame:
+    """One row per (model, seed): diagnostics on ``split`` at max noise ``noise`` and the
     gains on the blackout version of ``split``'s clean and pure-noise frames."""
-    test, dark = studies.pendulum_split(P, split, level), blackout_split(P, split)
+    test, dark = studies.pendulum_split(P, split, noise), blackout_split(P, split)
     rows = []
-    for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {level:g}", len(models)):
-        row = {"model": kind, "seed": seed, "noise": float(level),
+    for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {noise:g}", len(models)):
+        row = {"model": kind, "seed": seed, "noise": float(noise),
                **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
         if kind == "drf":
             on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
@@ -233,10 +233,10 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
 
 
 # ------------------------------------------------------------------------ command line
-def probe(P, models: dict[tuple[str, int], Any], level: float, split: str = "val") -> pd.DataFrame:
+def probe(P, models: dict[tuple[str, int], Any], noise: float, split: str = "val") -> pd.DataFrame:
     """The mechanism checks and the blackout MAE of ``models`` on ``split`` (validation by
     default: a run can be judged while it trains without touching the test set)."""
-    mech = mechanism_table(P, models, level, split)
+    mech = mechanism_table(P, models, noise, split)
     dark = blackout_table(blackout_curves(P, models, split))
     return dark.merge(mech, on=["model", "seed"])
 
