@@ -374,7 +374,7 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # blackout error is several times below the LSTM's and no_dynamics' trained the same way. Still short
 # of a full filter at this budget: r follows the noise only loosely and F does not beat "no change" on
 # clean frames. The book's protocol (`drfkit.protocols.PROTOCOLS['book']`) is the `book` variant; its
-# paper-scale confirmation is the table below once its runs are trained.
+# paper-scale confirmation is the table below.
 
 # %% [markdown]
 # ## The noise-regime map: where does a learned filter help?
