@@ -22,6 +22,7 @@ import pandas as pd
 import torch
 
 from drfkit import oracle, studies
+from drfkit.data.noise import Noise
 from drfkit.data.pendulum import blackout_frames, with_blackout
 from drfkit.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
 from drfkit.paths import predictions_dir
@@ -45,9 +46,11 @@ def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return pred.mean.numpy(), pred.total.numpy()
 
 
-def mechanism_table(P, models: dict[tuple[str, int], Any], noise: float, split: str = "test") -> pd.DataFrame:
-    """One row per (model, seed): diagnostics on ``split`` at max noise ``noise`` and the
-    gains on the blackout version of ``split``'s clean and pure-noise frames."""
+def mechanism_table(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "test") -> pd.DataFrame:
+    """One row per (model, seed): diagnostics on ``split`` at max noise ``noise`` (a pendulum
+    ``Noise`` or its level) and the gains on the blackout version of ``split``'s clean and
+    pure-noise frames."""
+    noise = studies.study_noise(P, "pendulum", noise).level
     test, dark = studies.pendulum_split(P, split, noise), blackout_split(P, split)
     rows = []
     for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {noise:g}", len(models)):
@@ -233,7 +236,7 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
 
 
 # ------------------------------------------------------------------------ command line
-def probe(P, models: dict[tuple[str, int], Any], noise: float, split: str = "val") -> pd.DataFrame:
+def probe(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "val") -> pd.DataFrame:
     """The mechanism checks and the blackout MAE of ``models`` on ``split`` (validation by
     default: a run can be judged while it trains without touching the test set)."""
     mech = mechanism_table(P, models, noise, split)

@@ -15,6 +15,7 @@ several notebooks, and must agree so that cached artefacts are found).
 """
 from __future__ import annotations
 
+import difflib
 import math
 import types
 from dataclasses import dataclass
@@ -233,10 +234,15 @@ class Params(types.SimpleNamespace):
         return dict(vars(self))
 
 
+def _named(key: str) -> str:
+    """'pend_book_epochs' [pendulum.book.epochs]: a notebook name with where it sits in a profile."""
+    return f"'{key}' [{'.'.join(PATHS[key])}]" if key in PATHS else f"'{key}'"
+
+
 def _coerce(key: str, typ: Any, value: Any, where: str) -> Any:
     def fail(expected: str) -> ParameterError:
         return ParameterError(
-            f"{where}: parameter '{key}' must be {expected}, got {value!r} ({type(value).__name__}); "
+            f"{where}: parameter {_named(key)} must be {expected}, got {value!r} ({type(value).__name__}); "
             f"allowed: {SPECS[key].allowed}"
         )
 
@@ -292,7 +298,7 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
         value = _coerce(key, spec.type, values[key], where)
         if not spec.check(value):
             raise ParameterError(
-                f"{where}: parameter '{key}' = {value!r} is out of range; allowed: {spec.allowed}"
+                f"{where}: parameter {_named(key)} = {value!r} is out of range; allowed: {spec.allowed}"
             )
         out[key] = value
     if out.get("ped_source") == "nuscenes":
@@ -300,10 +306,10 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
                                              "tables"),
                            ("pifpaf_predictions", "one sub-folder of PifPaf JSON per noise level (p0.01, ...)")):
             if key in out and not out[key]:
-                raise ParameterError(f"{where}: ped_source 'nuscenes' needs '{key}' in the profile: the folder that "
+                raise ParameterError(f"{where}: ped_source 'nuscenes' needs {_named(key)} in the profile: the folder that "
                                      f"holds {holds} (README, 'Real nuScenes data'); it is empty")
             if key in out and not Path(out[key]).is_dir():
-                raise ParameterError(f"{where}: parameter '{key}' = {out[key]!r} is not a folder on this machine")
+                raise ParameterError(f"{where}: parameter {_named(key)} = {out[key]!r} is not a folder on this machine")
     if "sim_detector" in out:
         from drfkit.data.sim_detector import DetectorConfig
 
@@ -412,7 +418,11 @@ def parse_overrides(items: list[str] | None) -> dict:
                                  f"got {item!r}")
         name = _BY_PATH.get(key, key)
         if name not in SPECS:
-            raise ParameterError(f"--set: unknown parameter {key!r}; known parameters: {sorted(_BY_PATH)}")
+            close = difflib.get_close_matches(key, list(_BY_PATH) + list(SPECS), n=3)
+            hint = f" (did you mean {' or '.join(close)}?)" if close else ""
+            raise ParameterError(f"--set: unknown parameter {key!r}{hint}; a key is a profile path "
+                                 f"(pendulum.epochs) or its notebook name (pend_epochs); known paths: "
+                                 f"{sorted(_BY_PATH)}")
         try:
             out[name] = yaml.safe_load(text)
         except yaml.YAMLError as exc:
@@ -425,7 +435,8 @@ def notebook_params(notebook: str, profile_values: dict[str, Any]) -> dict[str, 
     subset = {k: profile_values[k] for k in NOTEBOOKS[notebook] if k in profile_values}
     missing = [k for k in NOTEBOOKS[notebook] if k not in subset]
     if missing:
-        raise ParameterError(f"profile lacks parameter(s) {missing} needed by notebook {notebook}")
+        raise ParameterError(f"profile lacks parameter(s) {', '.join(_named(k) for k in missing)} "
+                             f"needed by notebook {notebook}")
     validate(notebook, subset)
     return subset
 

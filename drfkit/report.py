@@ -286,17 +286,25 @@ README_FIGURES = ("pendulum_mae", "pedestrians_mae")  # the README shows these; 
 
 
 def claims_summary_table(claims_csv: Path) -> list[str]:
-    """The README's short claims table (id, protocol where there is more than one, claim, the
-    paper's number, verdict) from ``claims.csv``; report.md and claims.md hold ours and the rules."""
+    """The README's short claims table from ``claims.csv``: one row per claim (id, claim, the paper's
+    number) and a verdict per protocol when there is more than one ("—" where a claim is judged
+    under one protocol only); report.md and claims.md hold ours and the rules."""
     from drfkit.claims import read_claims
 
     c = read_claims(claims_csv)
-    several = c["protocol"].nunique() > 1
-    head = ["id"] + (["protocol"] if several else []) + ["claim", "paper", "verdict"]
+    protocols = list(dict.fromkeys(c["protocol"]))
+    verdict_cols = [f"verdict, {p} protocol" for p in protocols] if len(protocols) > 1 else ["verdict"]
+    head = ["id", "claim", "paper"] + verdict_cols
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in c.itertuples():
-        cells = [r.id] + ([r.protocol] if several else []) + [r.claim, r.paper, f"**{r.verdict}**"]
+    for cid, rows in c.groupby("id", sort=False):
+        by_protocol = dict(zip(rows["protocol"], rows["verdict"]))
+        first = rows.iloc[0]
+        verdicts = [f"**{by_protocol[p]}**" if p in by_protocol else "—" for p in protocols]
+        cells = [cid, first["claim"], first["paper"]] + verdicts
         lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " |")
+    if len(protocols) > 1:
+        lines += ["", "— : the claim is judged under the paper's protocol only (the book's protocol changes "
+                      "only the pendulum models)."]
     return lines
 
 

@@ -260,3 +260,18 @@ def test_constant_velocity_filter():
     seen[:, 0] = False
     with pytest.raises(ValueError, match="first frame"):
         oracle.constant_velocity_filter(obs, np.ones_like(obs), seen, dt=dt, accel_std=1.0)
+
+
+def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
+    from drfkit import dynamics, studies
+    from drfkit.params import for_notebook, load_profile
+
+    P = for_notebook("01_pendulum_training", load_profile("quick"))
+    asked = []
+    monkeypatch.setattr(studies, "pendulum_split", lambda P, split, noise=None: asked.append((split, noise)) or {})
+    monkeypatch.setattr(dynamics, "blackout_split", lambda P, split: {})
+    for noise in (Noise("rkn_uniform", 0.75), 0.75):
+        assert dynamics.mechanism_table(P, {}, noise, "val").empty
+    assert asked == [("val", 0.75), ("val", 0.75)]
+    with pytest.raises(ValueError, match="rkn_uniform"):  # the pedestrians' kind is not the pendulum's
+        dynamics.mechanism_table(P, {}, Noise("salt_and_pepper", 0.05))

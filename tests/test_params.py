@@ -90,6 +90,7 @@ def test_wrong_type_or_range_names_the_key(key, value, fragment):
     with pytest.raises(ParameterError) as err:
         validate("01_pendulum_training", values)
     assert key in str(err.value) and fragment in str(err.value) and "allowed" in str(err.value)
+    assert f"[{'.'.join(PATHS[key])}]" in str(err.value)  # where the key sits in a profile
 
 
 @pytest.mark.parametrize("value", [[], ["pendulum", "pendulum"], ["nuscenes"], "pendulum"])
@@ -160,8 +161,16 @@ def test_misplaced_keys_name_where_they_belong(tmp_path, profile, fragment):
 
 def test_overrides_take_the_profile_path_or_the_notebook_name():
     assert parse_overrides(["pendulum.book.epochs=3", "pend_lr=0.01"]) == {"pend_book_epochs": 3, "pend_lr": 0.01}
-    with pytest.raises(ParameterError, match="unknown parameter 'pendulum.epohcs'"):
+    with pytest.raises(ParameterError, match="unknown parameter 'pendulum.epohcs'") as err:
         parse_overrides(["pendulum.epohcs=3"])
+    assert "did you mean pendulum.epochs" in str(err.value) and "notebook name (pend_epochs)" in str(err.value)
+
+
+def test_a_profile_missing_a_key_names_its_profile_path():
+    values = load_profile("quick")
+    del values["pend_book_epochs"]
+    with pytest.raises(ParameterError, match=r"'pend_book_epochs' \[pendulum\.book\.epochs\]"):
+        notebook_params("01_pendulum_training", values)
 
 
 def test_schema_types_are_python_types():
@@ -196,10 +205,10 @@ def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path
     from drfkit.params import ParameterError, load_profile, notebook_params, validate
 
     values = load_profile("quick") | {"ped_source": "nuscenes", "nuscenes_root": str(tmp_path), "pifpaf_predictions": ""}
-    with pytest.raises(ParameterError, match="needs 'pifpaf_predictions' in the profile"):
+    with pytest.raises(ParameterError, match="needs 'pifpaf_predictions' \\[pedestrians\\.pifpaf_predictions\\] in the profile"):
         validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path / "absent")
-    with pytest.raises(ParameterError, match="'pifpaf_predictions' = .*absent' is not a folder"):
+    with pytest.raises(ParameterError, match=r"'pifpaf_predictions' \[pedestrians\.pifpaf_predictions\] = .*absent' is not a folder"):
         validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path)
     assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).ped_source == "nuscenes"
@@ -241,3 +250,6 @@ def test_keep_outputs_lets_the_parameters_cell_change_only_its_comments(tmp_path
     nbformat.write(old, target)
     assert build_notebooks.keep_outputs(notebook("# a [section.a]: new words\na = 1\n"), target) == 0
     assert build_notebooks.keep_outputs(notebook("# a: old words\na = 2\n"), target) == 1  # a value: re-execute
+    # equal in Python, different parameter values: 1.0 or True where 1 was re-executes too
+    assert build_notebooks.keep_outputs(notebook("# a: old words\na = 1.0\n"), target) == 1
+    assert build_notebooks.keep_outputs(notebook("# a: old words\na = True\n"), target) == 1

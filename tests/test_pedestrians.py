@@ -203,7 +203,7 @@ def test_detector_draws_gross_outliers(truth):
 
 def test_detect_validates_inputs(truth):
     rng = np.random.default_rng(0)
-    with pytest.raises(ValueError, match="salt_and_pepper noise level must lie in"):
+    with pytest.raises(ValueError, match="noise level of kind salt_and_pepper must lie in"):
         detect(truth, Noise("salt_and_pepper", 1.5), rng)
     with pytest.raises(TypeError, match="takes a Noise value"):
         detect(truth, 0.01, rng)  # a bare number: which kind?
@@ -349,6 +349,9 @@ def test_record_fields_and_check_errors():
     del bad["depth"]
     with pytest.raises(ValueError, match="miss field"):
         check_records(bad)
+    old = {("noise_p" if k == "noise" else k): v for k, v in rec.items()}  # records from before the rename
+    with pytest.raises(ValueError, match="'noise_p' was renamed 'noise'"):
+        check_records(old)
     with pytest.raises(TypeError, match="dtype float32"):
         check_records({**rec, "depth": rec["depth"].astype(np.float64)})
     with pytest.raises(ValueError, match="trailing shape"):

@@ -145,3 +145,19 @@ def test_dynamics_lines_show_the_regime_map(tmp_path):
     text = "\n".join(dynamics_lines(tmp_path))
     assert "| 0.5 | 0.75 | 0.0400 | 0.0500 | 0.0800 | 0.0200 | 0.50 | 2.00 |" in text
     assert "| 1 | 0.75 | 0.0300 | 0.0300 | 0.0600 | 0.0150 | 0.50 | 2.00 |" in text
+
+
+def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tmp_path):
+    from drfkit.report import claims_summary_table
+
+    rows = [("C1", "paper", "not reproduced"), ("C1", "book", "partly"), ("C4", "paper", "reproduced")]
+    pd.DataFrame([{"id": i, "protocol": p, "claim": f"claim {i}", "paper": "1 | 2", "ours": "x", "verdict": v,
+                   "rule": "r"} for i, p, v in rows]).to_csv(tmp_path / "claims.csv", index=False)
+    lines = claims_summary_table(tmp_path / "claims.csv")
+    assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol |"
+    assert lines[2] == "| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** |"
+    assert lines[3] == "| C4 | claim C4 | 1 / 2 | **reproduced** | — |"
+    pd.DataFrame([{"id": "C4", "protocol": "paper", "claim": "c", "paper": "p", "ours": "x", "verdict": "partly",
+                   "rule": "r"}]).to_csv(tmp_path / "claims.csv", index=False)
+    assert claims_summary_table(tmp_path / "claims.csv") == ["| id | claim | paper | verdict |", "|---|---|---|---|",
+                                                             "| C4 | c | p | **partly** |"]

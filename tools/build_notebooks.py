@@ -69,7 +69,8 @@ def _same_names(cell, old_cells, i: int) -> bool:
     for ns, source in zip(defined, (cell.source, old_cells[i].source)):
         exec(source, ns)
         ns.pop("__builtins__", None)
-    return defined[0] == defined[1]
+    # repr, not ==: 1, 1.0 and True are equal in Python but are different parameter values
+    return {k: repr(v) for k, v in defined[0].items()} == {k: repr(v) for k, v in defined[1].items()}
 
 
 def keep_outputs(new: nbformat.NotebookNode, target: Path) -> int:

@@ -73,8 +73,10 @@ def check_records(rec: Mapping[str, np.ndarray]) -> int:
         raise TypeError(f"records must be a dict of numpy arrays, got {type(rec).__name__}")
     missing = [name for name in RECORD_FIELDS if name not in rec]
     if missing:
+        # records written before the noise field got its one name carry 'noise_p'
+        renamed = "; the field 'noise_p' was renamed 'noise': rebuild the records" if "noise_p" in rec else ""
         raise ValueError(
-            f"records miss field(s) {missing}; a pedestrian record needs {sorted(RECORD_FIELDS)}"
+            f"records miss field(s) {missing}{renamed}; a pedestrian record needs {sorted(RECORD_FIELDS)}"
         )
     lengths = {}
     for name, value in rec.items():
