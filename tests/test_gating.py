@@ -212,7 +212,7 @@ def test_assembled_metrics_are_gated_inference_on_common_masks(monkeypatch):
     model, data = tiny_drf(), keypoint_data()
     always, det = stage(model, data, "always"), stage(model, data, "no_dropout")
     h, gains = model.features(data.inputs, return_gains=True)
-    median = float(gating.competency_score(gains, 1)[data.mask].median())
+    median = float(gating.competency_score(gains.detach(), 1)[data.mask].median())
     for setting, kw in (("kalman_gain", {"direction": 1, "threshold": median}), ("random", {"n_random": 11})):
         selected = gating.select_frames(setting, gains, data.mask, **kw)
         assert 0 < int(selected.sum()) < int(data.mask.sum())
