@@ -29,7 +29,10 @@ rule then turns dropout off (``val_noise`` picks the validation noise).
 Gated inference is real, not simulated: features (encoder + filter) run once, the head
 runs with S samples on the gathered selected frames and once, deterministically, on the
 others; the results are scattered back. Times are measured, interleaved across settings,
-on the same test batch in the same run. Only models with a filter (DRF) have gains.
+on the same test batch in the same run. The metrics of every setting and threshold are
+assembled per frame from one deterministic and one always-dropout pass (``assemble``): the
+head is per frame, so that is gated inference's result on common random numbers, at the
+cost of two passes instead of one per threshold. Only models with a filter (DRF) have gains.
 
 Settings (the paper's table): ``no_dropout`` (aleatoric only), ``random`` (the same number
 of frames as the Kalman-gain gate selects on test, drawn uniformly, seeded),
@@ -248,19 +251,40 @@ def uncertainty_stage(model, h: torch.Tensor, gains: torch.Tensor | None, mask: 
         selected = torch.ones(h.shape[:2], dtype=torch.bool, device=h.device)
         m, a, e, t = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=dropout_p))
         return GatedPrediction(m, a, e, t, selected)
+    selected = select_frames(setting, gains, mask, direction=direction, threshold=threshold, n_random=n_random,
+                             random_seed=random_seed, kind=model.config.get("kind"))
+    return gated_head(model, h, selected, n_samples, dropout_p)
+
+
+def select_frames(setting: str, gains: torch.Tensor | None, mask: torch.Tensor, *, direction: int | None = None,
+                  threshold: float | None = None, n_random: int | None = None, random_seed: int = 0,
+                  kind: str | None = "drf") -> torch.Tensor:
+    """The (B, T) bool frames a gated ``setting`` ('kalman_gain' or 'random') sends to MC dropout,
+    among the real frames ``mask`` (B, T); gains (B, T, n, n) for 'kalman_gain'."""
     if setting == "kalman_gain":
         if direction is None or threshold is None:
             raise ValueError("the kalman_gain setting needs the direction and threshold of a gate fitted "
                              "on validation data (fit_gate)")
         if gains is None:
-            raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter, so no gains "
+            raise ValueError(f"model kind {kind!r} has no Kalman filter, so no gains "
                              f"to gate on; gating needs a 'drf' model")
-        selected = apply_gating(competency_score(gains, direction), threshold, mask)
-    else:
+        return apply_gating(competency_score(gains, direction), threshold, mask)
+    if setting == "random":
         if n_random is None:
             raise ValueError("the random setting needs n_random (the Kalman-gain gate's frame count)")
-        selected = random_selection(mask, n_random, random_seed)
-    return gated_head(model, h, selected, n_samples, dropout_p)
+        return random_selection(mask, n_random, random_seed)
+    raise ValueError(f"select_frames takes the gated settings 'kalman_gain' and 'random', got {setting!r}")
+
+
+def assemble(deterministic: GatedPrediction, always: GatedPrediction, selected: torch.Tensor) -> GatedPrediction:
+    """A gated prediction from two full passes: ``always``'s result on the ``selected`` (B, T)
+    frames, ``deterministic``'s (epistemic 0) elsewhere. The head is per frame, so this is what
+    ``gated_head`` computes, up to which random numbers the selected frames' masks draw."""
+    pick = selected.unsqueeze(-1)
+    both = lambda a, b: torch.where(pick, a, b)  # noqa: E731
+    return GatedPrediction(both(always.mean, deterministic.mean), both(always.aleatoric, deterministic.aleatoric),
+                           both(always.epistemic, torch.zeros_like(always.epistemic)),
+                           both(always.total, deterministic.total), selected)
 
 
 @torch.no_grad()
@@ -389,9 +413,14 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
                   thresholds: dict[str, float] | None = None, timing_frames: int = 0) -> pd.DataFrame:
     """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
 
-    Metrics: the features run once, then each setting's ``uncertainty_stage`` with the dropout
-    masks seeded by ``seed``. Random gating selects as many frames as the Kalman-gain gate does
-    on this test set (drawn with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
+    Metrics: the features run once, then one deterministic and one always-dropout pass (masks
+    seeded by ``seed``); each gated setting's prediction is ``assemble``d from the two: its
+    selected frames take the always pass's result, the others the deterministic one. The head is
+    per frame, so this is gated inference's result with the always pass's masks on the selected
+    frames (the timed gated inference draws masks for those frames alone: other random numbers,
+    the same distribution), and every setting and threshold is judged on common random numbers.
+    Random gating selects as many frames as the Kalman-gain gate does on this test set (drawn
+    with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
     adds Kalman-gain rows, each with its random twin 'random:<name>' (used by ``sweep_gate``).
 
     Times, per real frame, all measured in this call on the same inputs (interleaved medians),
@@ -425,14 +454,21 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     was = _eval_mode(model)
     try:
         h, gains = model.features(x, return_gains=True)
+        # Metrics from two full passes (``assemble``): every setting's frames take the same
+        # deterministic or always-dropout result, so settings differ only in which frames they select.
+        passes = {}
+        for setting in ("no_dropout", "always"):
+            torch.manual_seed(seed)
+            passes[setting] = uncertainty_stage(model, h, gains, real, setting, **common)
         # name -> (setting, stage keyword arguments); random twins take the Kalman-gain count
         variants: dict[str, tuple[str, dict[str, Any]]] = {
             "no_dropout": ("no_dropout", {}), "always": ("always", {})}
         rows = []
 
         def evaluate(name, setting, extra):
-            torch.manual_seed(seed)
-            pred = uncertainty_stage(model, h, gains, real, setting, **common, **extra)
+            pred = passes[setting] if setting in passes else assemble(
+                passes["no_dropout"], passes["always"],
+                select_frames(setting, gains, real, **extra, kind=model.config.get("kind")))
             variants[name] = (setting, extra)
             rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
                                                                   else ALWAYS),
@@ -593,7 +629,7 @@ def paper_table() -> pd.DataFrame:
 __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
-    "GatedPrediction", "gated_head", "uncertainty_stage", "run_setting", "timing_subset", "measure_interleaved",
+    "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting", "timing_subset", "measure_interleaved",
     "Gate", "fit_gate",
     "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "selected_fraction", "gating_study",
     "paper_table",

@@ -76,18 +76,29 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
 
 def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[str]):
     """MAE per frame (mean over seeds) through a blackout, the blackout frames shaded.
-    curves: columns model, seed, frame, mae (``drfkit.dynamics.blackout_curves``); a model
-    absent from MODEL_COLORS (the bound) is drawn dashed in black."""
-    fig, axes = new_figure(1, width=6.0)
-    ax = axes[0, 0]
-    ax.axvspan(frames[0] - 0.5, frames[1] - 0.5, color="gray", alpha=0.2, label="pure-noise frames")
-    for kind in models:
-        mean = curves[curves["model"] == kind].groupby("frame")["mae"].mean()
-        known = kind in MODEL_COLORS
-        ax.plot(mean.index, mean.to_numpy(), color=color(kind) if known else "black", ls="-" if known else "--",
-                label=label(kind))
-    ax.set_xlabel("frame"); ax.set_ylabel("MAE (cos θ, sin θ)"); ax.set_yscale("log")
-    ax.legend(fontsize=7)
+    curves: columns model, seed, frame, mae (``drfkit.dynamics.blackout_curves``), and optionally
+    protocol: then one panel per protocol (rows without a protocol, such as the bound's, are drawn
+    in every panel). A model absent from MODEL_COLORS (the bound) is drawn dashed in black."""
+    has_protocol = "protocol" in curves
+    panels = list(dict.fromkeys(curves["protocol"].dropna())) if has_protocol else [None]
+    fig, axes = new_figure(len(panels), width=6.0 if len(panels) == 1 else 4.2)
+    for ax, protocol in zip(axes[0], panels):
+        rows = curves if protocol is None else curves[curves["protocol"].isna() | (curves["protocol"] == protocol)]
+        ax.axvspan(frames[0] - 0.5, frames[1] - 0.5, color="gray", alpha=0.2, label="pure-noise frames")
+        for kind in models:
+            mean = rows[rows["model"] == kind].groupby("frame")["mae"].mean()
+            known = kind in MODEL_COLORS
+            ax.plot(mean.index, mean.to_numpy(), color=color(kind) if known else "black", ls="-" if known else "--",
+                    label=label(kind))
+        ax.set_xlabel("frame"); ax.set_yscale("log")
+        if protocol is not None:
+            ax.set_title(f"{protocol} protocol")
+    axes[0, 0].set_ylabel("MAE (cos θ, sin θ)")
+    axes[0, 0].legend(fontsize=7)
+    if len(panels) > 1:
+        lo, hi = zip(*(ax.get_ylim() for ax in axes[0]))
+        for ax in axes[0]:
+            ax.set_ylim(min(lo), max(hi))
     return fig
 
 
@@ -192,6 +203,10 @@ HEADLINE_FIGURES = [
     ("pedestrians_sweep", "Pedestrians: MAE, PICP and NLL along the noise sweep"),
     ("pendulum_book_mae", "Pendulum MAE of the book's training protocol (the DRF's filter checked to filter)"),
     ("pendulum_blackout", "Pendulum: MAE per frame through 15 pure-noise frames, with the true-physics bound"),
+    ("pendulum_blackout_protocols", "Pendulum blackout under the paper's and the book's protocol, with the "
+                                    "true-physics bound"),
+    ("pendulum_mae_with_bound", "Pendulum MAE (paper's protocol) beside the true-physics bound and the paper's "
+                                "values (black ticks)"),
     ("pendulum_regime_map", "Noise-regime map: MAE along the test noise for each training noise, and on the blackout"),
 ]
 
@@ -282,7 +297,7 @@ def dynamics_lines(tables: Path) -> list[str]:
     return lines
 
 
-README_FIGURES = ("pendulum_mae", "pedestrians_mae")  # the README shows these; report.md all of HEADLINE_FIGURES
+README_FIGURES = ("pendulum_mae_with_bound", "pendulum_blackout_protocols", "pedestrians_mae")  # the README shows these; report.md all of HEADLINE_FIGURES
 
 
 def claims_summary_table(claims_csv: Path) -> list[str]:
@@ -322,9 +337,10 @@ def readme_section(profile: str, command: str) -> str:
              f"dynamics tables: [results/{profile}/report.md](results/{profile}/report.md) (written with this "
              f"section by `python -m drfkit.report --profiles {profile}`).", ""]
     lines += claims_summary_table(root / "claims.csv") + [""]
-    for name, caption in HEADLINE_FIGURES:
-        png = root / "figures" / f"{name}.png"
-        if name in README_FIGURES and png.exists():
+    captions = dict(HEADLINE_FIGURES)
+    for name in README_FIGURES:  # in this order
+        png, caption = root / "figures" / f"{name}.png", captions[name]
+        if png.exists():
             lines += [f"![{caption}]({png.relative_to(REPO_ROOT)})", f"*{caption}* (`{command}`)", ""]
     return "\n".join(lines)
 

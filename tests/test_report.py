@@ -161,3 +161,25 @@ def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tm
                    "rule": "r"}]).to_csv(tmp_path / "claims.csv", index=False)
     assert claims_summary_table(tmp_path / "claims.csv") == ["| id | claim | paper | verdict |", "|---|---|---|---|",
                                                              "| C4 | c | p | **partly** |"]
+
+
+def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from drfkit.report import plot_blackout
+
+    frames = list(range(10))
+    curve = lambda model, protocol, level: pd.DataFrame(  # noqa: E731
+        {"model": model, "seed": 0, "frame": frames, "mae": level, "protocol": protocol})
+    curves = pd.concat([curve("drf", "paper", 0.5), curve("drf", "book", 0.1), curve("physics_bound", None, 0.02)])
+    fig = plot_blackout(curves, (3, 6), ["drf", "physics_bound"])
+    axes = fig.axes
+    assert [ax.get_title() for ax in axes] == ["paper protocol", "book protocol"]
+    for ax, level in zip(axes, (0.5, 0.1)):
+        lines = {line.get_label(): line.get_ydata() for line in ax.get_lines()}
+        assert len(lines) == 2 and any((y == level).all() for y in lines.values())
+        assert any((y == 0.02).all() for y in lines.values())  # the bound in every panel
+    assert axes[0].get_ylim() == axes[1].get_ylim()
+    single = plot_blackout(curves.drop(columns="protocol").query("model != 'drf' or mae == 0.5"), (3, 6), ["drf"])
+    assert len(single.axes) == 1 and single.axes[0].get_title() == ""

@@ -37,7 +37,10 @@
 #
 # **Gated inference is real.** The features (encoder and filter) run once; the head runs with
 # `n_samples` dropout samples on the gathered selected frames and once on the rest; results are
-# scattered back. Times are measured with `torch.utils.benchmark`'s clock in interleaved rounds
+# scattered back. The head treats each frame on its own, so PICP, MPIW and NLL of every setting and
+# threshold are assembled per frame from one deterministic and one always-dropout pass over the test
+# set (`gating.assemble`): Kalman-gain and random gating then differ only in the frames they pick,
+# not in their dropout draws. Times are measured with `torch.utils.benchmark`'s clock in interleaved rounds
 # (medians; `drfkit.timing.interleaved_times`), in the same run, per real frame, on one batch of
 # evenly spaced test sequences holding about `gating_timing_frames` real frames (the
 # `timed_frames` column; 0 = all); PICP, MPIW and NLL always use every test sequence.
