@@ -258,9 +258,10 @@ def uncertainty_stage(model, h: torch.Tensor, gains: torch.Tensor | None, mask: 
 
 def select_frames(setting: str, gains: torch.Tensor | None, mask: torch.Tensor, *, direction: int | None = None,
                   threshold: float | None = None, n_random: int | None = None, random_seed: int = 0,
-                  kind: str | None = "drf") -> torch.Tensor:
+                  kind: str | None = None) -> torch.Tensor:
     """The (B, T) bool frames a gated ``setting`` ('kalman_gain' or 'random') sends to MC dropout,
-    among the real frames ``mask`` (B, T); gains (B, T, n, n) for 'kalman_gain'."""
+    among the real frames ``mask`` (B, T); gains (B, T, n, n) for 'kalman_gain' (``kind``: the
+    model's, named in the error when it has none)."""
     if setting == "kalman_gain":
         if direction is None or threshold is None:
             raise ValueError("the kalman_gain setting needs the direction and threshold of a gate fitted "
@@ -629,7 +630,8 @@ def paper_table() -> pd.DataFrame:
 __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
-    "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting", "timing_subset", "measure_interleaved",
+    "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting",
+    "timing_subset", "measure_interleaved",
     "Gate", "fit_gate",
     "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "selected_fraction", "gating_study",
     "paper_table",

@@ -306,8 +306,8 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
                                              "tables"),
                            ("pifpaf_predictions", "one sub-folder of PifPaf JSON per noise level (p0.01, ...)")):
             if key in out and not out[key]:
-                raise ParameterError(f"{where}: ped_source 'nuscenes' needs {_named(key)} in the profile: the folder that "
-                                     f"holds {holds} (README, 'Real nuScenes data'); it is empty")
+                raise ParameterError(f"{where}: ped_source 'nuscenes' needs {_named(key)} in the profile: the "
+                                     f"folder that holds {holds} (README, 'Real nuScenes data'); it is empty")
             if key in out and not Path(out[key]).is_dir():
                 raise ParameterError(f"{where}: parameter {_named(key)} = {out[key]!r} is not a folder on this machine")
     if "sim_detector" in out:

@@ -80,7 +80,7 @@ def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[st
     protocol: then one panel per protocol (rows without a protocol, such as the bound's, are drawn
     in every panel). A model absent from MODEL_COLORS (the bound) is drawn dashed in black."""
     has_protocol = "protocol" in curves
-    panels = list(dict.fromkeys(curves["protocol"].dropna())) if has_protocol else [None]
+    panels = (list(dict.fromkeys(curves["protocol"].dropna())) if has_protocol else []) or [None]
     fig, axes = new_figure(len(panels), width=6.0 if len(panels) == 1 else 4.2)
     for ax, protocol in zip(axes[0], panels):
         rows = curves if protocol is None else curves[curves["protocol"].isna() | (curves["protocol"] == protocol)]
@@ -297,7 +297,8 @@ def dynamics_lines(tables: Path) -> list[str]:
     return lines
 
 
-README_FIGURES = ("pendulum_mae_with_bound", "pendulum_blackout_protocols", "pedestrians_mae")  # the README shows these; report.md all of HEADLINE_FIGURES
+# the README shows these, in this order; report.md all of HEADLINE_FIGURES
+README_FIGURES = ("pendulum_mae_with_bound", "pendulum_blackout_protocols", "pedestrians_mae")
 
 
 def claims_summary_table(claims_csv: Path) -> list[str]:
@@ -338,7 +339,7 @@ def readme_section(profile: str, command: str) -> str:
              f"section by `python -m drfkit.report --profiles {profile}`).", ""]
     lines += claims_summary_table(root / "claims.csv") + [""]
     captions = dict(HEADLINE_FIGURES)
-    for name in README_FIGURES:  # in this order
+    for name in README_FIGURES:
         png, caption = root / "figures" / f"{name}.png", captions[name]
         if png.exists():
             lines += [f"![{caption}]({png.relative_to(REPO_ROOT)})", f"*{caption}* (`{command}`)", ""]

@@ -183,3 +183,5 @@ def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
     assert axes[0].get_ylim() == axes[1].get_ylim()
     single = plot_blackout(curves.drop(columns="protocol").query("model != 'drf' or mae == 0.5"), (3, 6), ["drf"])
     assert len(single.axes) == 1 and single.axes[0].get_title() == ""
+    unlabelled = plot_blackout(curves.assign(protocol=None), (3, 6), ["drf"])  # no protocol named: one panel
+    assert len(unlabelled.axes) == 1

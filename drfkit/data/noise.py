@@ -54,7 +54,8 @@ class Noise:
         if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)):
             raise TypeError(f"a noise level is a number in [0, 1] ({NOISE_KINDS[self.kind]}), got {level!r}")
         if not (math.isfinite(float(level)) and 0.0 <= float(level) <= 1.0):
-            raise ValueError(f"a noise level of kind {self.kind} must lie in [0, 1] ({NOISE_KINDS[self.kind]}), got {level}")
+            raise ValueError(f"a noise level of kind {self.kind} must lie in [0, 1] ({NOISE_KINDS[self.kind]}), "
+                             f"got {level}")
         object.__setattr__(self, "level", float(level))
 
     def key(self) -> dict[str, object]:
