@@ -3,6 +3,9 @@
 PROFILE ?= paper
 # JOBS > 1: train the missing runs first on a Dask LocalCluster of JOBS workers (drfkit.grid)
 JOBS ?= 1
+# REMEASURE=1: measure timings and compute the cached studies again (drfkit.measurements)
+REMEASURE ?=
+REMEASURE_FLAG := $(if $(filter-out 0,$(REMEASURE)),--remeasure)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -14,6 +17,7 @@ NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbva
 help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
 	@echo "               [JOBS=N]               train the missing runs first on N Dask workers"
+	@echo "               [REMEASURE=1]          measure timings again instead of reusing this machine's"
 	@echo "make quick                            the fast profile (< 10 min on 2 CPU cores)"
 	@echo "make test                             unit tests + strict nbval on notebooks/"
 	@echo "make bench                            the timing benchmark alone, prints the table"
@@ -27,11 +31,11 @@ $(STAMP): environment.txt pyproject.toml
 	@touch $@
 
 reproduce: $(STAMP)
-	$(PY) -m drfkit.pipeline --profile $(PROFILE) --jobs $(JOBS)
+	$(PY) -m drfkit.pipeline --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG)
 
 # the pipeline directly, not a second make: a SIGTERM to this make then reaches it (it dies with its parent)
 quick: $(STAMP)
-	$(PY) -m drfkit.pipeline --profile quick
+	$(PY) -m drfkit.pipeline --profile quick $(REMEASURE_FLAG)
 
 test: $(STAMP) unit nbval
 
@@ -51,4 +55,4 @@ clean:
 	find results -mindepth 1 -maxdepth 1 ! -name paper -exec rm -rf {} +
 	rm -rf .pytest_cache
 	find . -name __pycache__ -type d -not -path './$(VENV)/*' -prune -exec rm -rf {} +
-	rm -rf results/paper/data results/paper/predictions
+	rm -rf results/paper/data results/paper/predictions results/paper/measurements

@@ -619,6 +619,30 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
             "validation": cat(vals)}
 
 
+def train_noise_gates(P, study: str, models: dict) -> pd.DataFrame:
+    """The gating rule tuned on validation at the *training* noise (pendulum
+    ``pend_train_max_noise``, pedestrians ``ped_train_p``), one row per DRF seed of ``models``:
+    the fraction it picks on validation and the fraction of the test frames at
+    ``evaluation_level`` its threshold then selects."""
+    from drfkit import studies
+
+    registry.study(study)  # a clear error for an unknown study
+    train_noise = {"pendulum": P.pend_train_max_noise, "pedestrians": P.ped_train_p}[study]
+    val = studies.study_data(P, study, "val", train_noise)
+    test = studies.study_data(P, study, "test", evaluation_level(P, study))
+    rows = []
+    for (kind, seed), model in sorted(models.items()):
+        if kind != "drf":
+            continue
+        gate, _ = fit_gate(model, val, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
+                           n_points=P.gating_sweep_points, level=P.interval_level, seed=seed)
+        rows.append({"study": study, "seed": seed, "val_noise": train_noise, "direction": gate.direction,
+                     "rank_correlation": gate.rank_correlation, "val_fraction": gate.val_fraction,
+                     "val_picp": gate.val_picp, "val_picp_always": gate.val_picp_always,
+                     "test_fraction": selected_fraction(model, gate, test)})
+    return pd.DataFrame(rows)
+
+
 def paper_table() -> pd.DataFrame:
     """The paper's gating table (drfkit.paper.GATING) with PICP as a fraction."""
     from drfkit.paper import GATING
@@ -631,7 +655,7 @@ __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "rank_correlation", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
     "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting",
-    "timing_subset", "measure_interleaved",
+    "timing_subset", "measure_interleaved", "train_noise_gates",
     "Gate", "fit_gate",
     "evaluate_gate", "sweep_gate", "split_sweep", "evaluation_level", "selected_fraction", "gating_study",
     "paper_table",

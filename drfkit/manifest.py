@@ -105,6 +105,21 @@ def record_notebook(profile: str, notebook: str, **fields: Any) -> None:
     atomic_write_json(manifest_path(profile), manifest)
 
 
+_REUSED: list[dict[str, Any]] = []  # measurement-cache entries this process reused (drfkit.measurements)
+
+
+def note_reused(entry: dict[str, Any]) -> None:
+    _REUSED.append(entry)
+
+
+def reused_measurements(clear: bool = False) -> list[dict[str, Any]]:
+    """The measurement-cache entries this process has reused so far (``clear``: and forget them)."""
+    out = list(_REUSED)
+    if clear:
+        _REUSED.clear()
+    return out
+
+
 class NotebookTimer:
     """Records a notebook's start in the manifest; ``finish()`` records end and duration."""
 
@@ -115,9 +130,11 @@ class NotebookTimer:
                         duration_s=None, status="running")
 
     def finish(self, **extra: Any) -> float:
+        """Record the end, the duration and the measurement-cache entries this notebook reused
+        (``drfkit.measurements``: their timings were measured before, not in this run)."""
         duration = time.perf_counter() - self.t0
         record_notebook(self.profile, self.notebook, finished=now_iso(), duration_s=round(duration, 2),
-                        status="ok", **extra)
+                        status="ok", reused_measurements=reused_measurements(clear=True), **extra)
         return duration
 
 

@@ -219,7 +219,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="N > 1: first train the training notebooks' missing runs on a Dask LocalCluster "
                              "of N workers (drfkit.grid), then run the notebooks; 1 (default): sequential")
     parser.add_argument("--scheduler", help="like --jobs, on this Dask scheduler (tcp://host:8786) or local:N")
+    parser.add_argument("--remeasure", action="store_true",
+                        help="measure the timings and compute the cached deterministic studies again "
+                             "(drfkit.measurements) instead of reusing them")
     args = parser.parse_args(argv)
+    if args.remeasure:
+        from drfkit.measurements import REMEASURE_ENV
+
+        os.environ[REMEASURE_ENV] = "1"  # the notebooks' kernels inherit it
     _die_with_parent()
     try:
         overrides = parse_overrides(args.set)

@@ -11,7 +11,8 @@ works for all of them):
                              step per model, seconds per epoch, optionally ``count_flops``),
                              ``epoch_times``, ``recursion_scaling``, ``fit_fixed_and_per_item``
 ``drfkit.timing.inference``  the inference benchmark, the paper's Table "performance":
-                             ``inference_benchmark`` of a prediction with uncertainty for one new
+                             ``inference_benchmark`` (``inference_benchmark_with_load``: with the
+                             machine's load around it) of a prediction with uncertainty for one new
                              frame (``make_frame_fn``), its table (``add_ratios``, ``lookup``,
                              ``speedup_vs_monoloco``) and the CLI ``main``
 ``python -m drfkit.timing --profile quick|paper|path.yaml``
@@ -23,7 +24,8 @@ The streaming step the inference benchmark times is the models' own:
 """
 from drfkit.timing.clock import _single_calls, _warm_timer, interleaved_times, load_average, torch_threads
 from drfkit.timing.inference import (BASELINE, COLUMNS, GROUP, MODES, STUDIES, add_ratios, build_timing_model,
-                                     example_frames, inference_benchmark, lookup, main, make_frame_fn,
+                                     example_frames, inference_benchmark,
+                                     inference_benchmark_with_load, lookup, main, make_frame_fn,
                                      speedup_vs_monoloco, timing_devices)
 from drfkit.timing.training import (count_flops, epoch_times, fit_fixed_and_per_item, recursion_scaling,
                                     training_step, training_step_times)
@@ -33,5 +35,5 @@ __all__ = [
     "training_step", "training_step_times", "epoch_times", "recursion_scaling", "fit_fixed_and_per_item",
     "count_flops",
     "STUDIES", "MODES", "BASELINE", "COLUMNS", "GROUP", "build_timing_model", "example_frames", "make_frame_fn",
-    "timing_devices", "inference_benchmark", "add_ratios", "lookup", "speedup_vs_monoloco", "main",
+    "timing_devices", "inference_benchmark", "inference_benchmark_with_load", "add_ratios", "lookup", "speedup_vs_monoloco", "main",
 ]

@@ -228,6 +228,14 @@ def inference_benchmark(n_samples: int = 25, batch_sizes=(1, 16, 256), threads=(
     return add_ratios(pd.DataFrame(rows))
 
 
+def inference_benchmark_with_load(*args, **kwargs) -> tuple[float, pd.DataFrame, float]:
+    """``(load before, inference_benchmark(*args, **kwargs), load after)``: the machine's 1-minute
+    load average around the run, kept with its table (a reused measurement keeps its own loads)."""
+    before = load_average()
+    table = inference_benchmark(*args, **kwargs)
+    return before, table, load_average()
+
+
 def add_ratios(frame: pd.DataFrame) -> pd.DataFrame:
     """Fill ratio_to_monoloco_published and ratio_to_no_sampling from median_ms_per_frame,
     dividing only inside one (batch, threads, device) group (see ``inference_benchmark``)."""

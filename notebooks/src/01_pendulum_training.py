@@ -120,7 +120,10 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # every model in turn, so a slow spell of the machine hits all of them); seconds per epoch follow
 # from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios
 # (at least 15 rounds; `ratio_to_no_dynamics_iqr` is their interquartile range). The target is a
-# DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count. In training the DRF's
+# DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count. A rerun on the same
+# machine with the same code reuses these timings and the deterministic studies below
+# (`drfkit.measurements`: each cell says when it measured; `make reproduce REMEASURE=1` measures
+# again). In training the DRF's
 # recursion runs as one autograd node with a hand-written backward (`drfkit.models.recursion`; the
 # tests check it against autograd); `drf_per_step` is the same model differentiated step by step
 # by autograd, for comparison.
@@ -139,15 +142,16 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 
 # %%
 # NBVAL_IGNORE_OUTPUT
+from drfkit.measurements import cached
 from drfkit.timing import training_step_times
 
 train = studies.pendulum_data(P, "train")
 batch = min(50, len(train))
 configs = {k: studies.model_config("pendulum", k) for k in ["no_dynamics", "lstm", "drf"]}
-speed = training_step_times(configs | {"drf_per_step": configs["drf"]}, train.inputs[:batch], train.targets[:batch],
-                            n_batches_per_epoch=int(np.ceil(P.pend_train_sequences / batch)),
-                            min_run_time=0.5, min_rounds=15, model_attrs={"drf_per_step": {"whole_sequence": False}},
-                            with_flops=True)
+speed = cached(P.profile, training_step_times, configs | {"drf_per_step": configs["drf"]}, train.inputs[:batch],
+               train.targets[:batch], n_batches_per_epoch=int(np.ceil(P.pend_train_sequences / batch)),
+               min_run_time=0.5, min_rounds=15, model_attrs={"drf_per_step": {"whole_sequence": False}},
+               with_flops=True, timing=True)
 save_table(P.profile, "pendulum_training_speed", speed)
 drf_row = speed.set_index("model").loc["drf"]
 nd_row = speed.set_index("model").loc["no_dynamics"]
@@ -173,8 +177,8 @@ speed
 # NBVAL_IGNORE_OUTPUT
 from drfkit.timing import epoch_times
 
-epochs = epoch_times(configs, train, val, {k: studies.train_config(P, "pendulum", k, P.seeds[0]) for k in configs},
-                     rounds=3)
+epochs = cached(P.profile, epoch_times, configs, train, val,
+                {k: studies.train_config(P, "pendulum", k, P.seeds[0]) for k in configs}, rounds=3, timing=True)
 save_table(P.profile, "pendulum_epoch_times", epochs)
 print(epoch_times_line(epochs).replace("**", ""))
 epochs
@@ -197,8 +201,8 @@ epochs
 # NBVAL_IGNORE_OUTPUT
 from drfkit.timing import recursion_scaling
 
-scaling = pd.concat([recursion_scaling(configs["no_dynamics"], configs["drf"], train.inputs[:batch], train.targets[:batch],
-                                       min_run_time=0.5, min_rounds=15, threads=n)
+scaling = pd.concat([cached(P.profile, recursion_scaling, configs["no_dynamics"], configs["drf"], train.inputs[:batch],
+                            train.targets[:batch], min_run_time=0.5, min_rounds=15, threads=n, timing=True)
                      for n in sorted({1, torch.get_num_threads()})], ignore_index=True)
 save_table(P.profile, "pendulum_recursion_scaling", scaling)
 fig, axes = new_figure(width=4.8)
@@ -274,7 +278,7 @@ from drfkit import dynamics
 
 models = {key: load_checkpoint(res.best_path) for key, res in results.items()}
 level = max(P.pend_eval_max_noise)
-mechanism = dynamics.mechanism_table(P, models, level)
+mechanism = cached(P.profile, dynamics.mechanism_table, P, models, level, timing=False)
 save_table(P.profile, "pendulum_mechanism", mechanism)
 mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"]).round(3).T
 
@@ -299,7 +303,8 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # %%
 # NBVAL_IGNORE_OUTPUT
 no_dyn = {seed: m for (kind, seed), m in models.items() if kind == "no_dynamics"}
-bound, bound_curves = dynamics.physics_bound(P, no_dyn, P.pend_eval_max_noise, n_particles=P.bound_particles)
+bound, bound_curves = cached(P.profile, dynamics.physics_bound, P, no_dyn, P.pend_eval_max_noise,
+                             n_particles=P.bound_particles, timing=False)
 pixels = dynamics.pixel_reference(P, P.pend_eval_max_noise)
 save_table(P.profile, "pendulum_physics_bound", bound)
 save_table(P.profile, "pendulum_pixel_reference", pixels)
@@ -426,7 +431,7 @@ for protocol in P.pend_protocols:
         trained = studies.trained_models(P, "pendulum", progress=True, protocol=protocol)
         dark_curves[protocol] = dynamics.blackout_curves(P, trained)
         pieces[protocol] = (evaluate_study(P, "pendulum", P.pend_eval_max_noise, models=trained),
-                            dynamics.mechanism_table(P, trained, level),
+                            cached(P.profile, dynamics.mechanism_table, P, trained, level, timing=False),
                             dynamics.blackout_table(dark_curves[protocol]))
 protocols = pd.concat([dynamics.protocol_table(name, *parts) for name, parts in pieces.items()], ignore_index=True)
 save_table(P.profile, "pendulum_protocols", protocols)

@@ -45,6 +45,10 @@
 # training is needed. **Ratios are taken only between measurements of one run and one
 # (batch, threads, device) group** — machines and runs differ too much for anything else.
 # The pendulum has no Monoloco: there its ratios are to each model's own `no_sampling` pass.
+#
+# **Reruns.** A measurement made on this machine with the same code and parameters is reused
+# (`drfkit.measurements`: the cell says so and when it was measured); `make reproduce REMEASURE=1`
+# or `make bench` measures again.
 
 # %% tags=["parameters"]
 
@@ -65,7 +69,8 @@ from drfkit.io import atomic_write_csv
 from drfkit.paper import TIMING_MS, TIMING_SPEEDUP
 from drfkit.paths import results_dir
 from drfkit.report import color, label, new_figure, save_figure, save_table
-from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, inference_benchmark, load_average, lookup,
+from drfkit.measurements import cached
+from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, inference_benchmark_with_load, lookup,
                            speedup_vs_monoloco, timing_devices)
 
 # %% [markdown]
@@ -75,10 +80,9 @@ from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, inference_benchm
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-load_before = load_average()
-table = inference_benchmark(P.n_samples, P.timing_batch_sizes, P.timing_threads, P.timing_min_run_time,
-                            P.device, seed=P.seeds[0])
-load_after = load_average()
+load_before, table, load_after = cached(P.profile, inference_benchmark_with_load, P.n_samples, P.timing_batch_sizes,
+                                        P.timing_threads, P.timing_min_run_time, P.device, seed=P.seeds[0],
+                                        timing=True)
 save_table(P.profile, "timing", table)
 atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
 table[table["batch"] == min(P.timing_batch_sizes)].drop(columns=["n_samples", "load_1min"]).round(4)

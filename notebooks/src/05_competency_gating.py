@@ -68,6 +68,7 @@ import torch
 from drfkit import claims, gating, studies
 from drfkit.evaluate import summarise
 from drfkit.io import atomic_write_csv
+from drfkit.measurements import cached
 from drfkit.paths import results_dir
 from drfkit.report import new_figure, save_figure, save_table
 
@@ -81,12 +82,14 @@ torch.set_num_threads(P.threads or 1)
 
 # %% [markdown]
 # ## Gates fitted on validation data, evaluated on the test sets
-# Trained models come from the shared cache (`studies.trained_models`: trained on first use).
+# Trained models come from the shared cache (`studies.trained_models`: trained on first use). The
+# study times the settings, so a rerun on the same machine with the same code and parameters reuses
+# its last run (`drfkit.measurements`; `make reproduce REMEASURE=1` measures again).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
 models = {g: studies.trained_models(P, g[0], protocol=g[1]) for g in GROUPS}
-runs = {g: gating.gating_study(P, g[0], models=models[g]) for g in GROUPS}
+runs = {g: cached(P.profile, gating.gating_study, P, g[0], models=models[g], timing=True) for g in GROUPS}
 stack = lambda part: pd.concat([r[part].assign(protocol=g[1]) for g, r in runs.items()], ignore_index=True)  # noqa: E731
 table, sweep, validation = stack("table"), stack("sweep"), stack("validation")
 atomic_write_csv(results_dir(P.profile) / "gating.csv", table)
@@ -132,21 +135,9 @@ gates.rename(columns={"fraction": "test_fraction"}).round(4)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-train_noise = {"pendulum": P.pend_train_max_noise, "pedestrians": P.ped_train_p}
-in_dist = []
-for study, protocol in GROUPS:
-    val_id = studies.study_data(P, study, "val", train_noise[study])
-    test = studies.study_data(P, study, "test", gating.evaluation_level(P, study))
-    for (kind, seed), model in sorted(models[(study, protocol)].items()):
-        if kind != "drf":
-            continue
-        gate, _ = gating.fit_gate(model, val_id, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
-                                  n_points=P.gating_sweep_points, level=P.interval_level, seed=seed)
-        in_dist.append({"study": study, "protocol": protocol, "seed": seed, "val_noise": train_noise[study], "direction": gate.direction,
-                        "rank_correlation": gate.rank_correlation, "val_fraction": gate.val_fraction,
-                        "val_picp": gate.val_picp, "val_picp_always": gate.val_picp_always,
-                        "test_fraction": gating.selected_fraction(model, gate, test)})
-in_dist = pd.DataFrame(in_dist)
+in_dist = pd.concat([cached(P.profile, gating.train_noise_gates, P, study, models[(study, protocol)], timing=False)
+                     .assign(protocol=protocol) for study, protocol in GROUPS], ignore_index=True)
+in_dist.insert(1, "protocol", in_dist.pop("protocol"))
 _ = save_table(P.profile, "gating_train_noise_gate", in_dist)
 in_dist.round(4)
 
