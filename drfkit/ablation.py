@@ -26,7 +26,8 @@ import pandas as pd
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout, with_random_blackouts
+from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, load_pendulum, redraw_noise, with_blackout,
+                                  with_random_blackouts)
 from drfkit.diagnostics import blackout_summary, diagnose
 from drfkit.dynamics import BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
 from drfkit.io import atomic_write_json, param_hash
@@ -57,7 +58,9 @@ def _run(name: str, seed: int, budget_name: str, out: str | Path | None) -> tupl
         raise ValueError(f"unknown budget {budget_name!r}; choose from {sorted(BUDGETS)}")
     budget, spec = BUDGETS[budget_name], variant_spec(name)
     root = Path(out) if out is not None else results_root() / "ablation"
-    key = param_hash({"budget": budget, "spec": spec, "seed": seed, "data_seed": DATA_SEED}, 8)
+    key_spec = {k: v for k, v in spec.items() if not (k == "train" and not v)}  # rows from before 'train' keep their key
+    key = param_hash({"budget": budget, "spec": key_spec, "seed": seed, "data_seed": DATA_SEED,
+                      "frames": GENERATOR_VERSION}, 8)
     return budget, spec, root / budget_name, key
 
 
@@ -71,16 +74,36 @@ def train_variant(name: str, seed: int, budget_name: str = "small", out: str | P
     """Train (or resume, or load when finished) one variant at one seed; returns (TrainResult, key)."""
     budget, spec, folder, key = _run(name, seed, budget_name, out)
     cache = data_dir(out)
-    train = _split(cache, budget, "train", spec["train_max_noise"])
+    noise = Noise("rkn_uniform", spec["train_max_noise"])
+    clean_train = _split(cache, budget, "train", spec["train_max_noise"])
+    train = clean_train
     if spec["blackouts"]:
         train = with_random_blackouts(train, spec["blackouts"]["fraction"], tuple(spec["blackouts"]["lengths"]),
                                       seed=DATA_SEED + TRAINING_BLACKOUT_SEED_OFFSET)
     val = _split(cache, budget, "val", spec["train_max_noise"])
     config = {"kind": spec["kind"], "input_kind": "pendulum", "out_dim": 2, **spec["model"]}
-    cfg = TrainConfig(epochs=budget["epochs"], lr=budget["lr"], batch_size=budget["batch_size"], seed=seed)
+    cfg = train_config(budget, spec["train"], seed)
+    fresh = None
+    if spec["train"].get("fresh_noise"):
+        def fresh(epoch: int) -> SequenceData:  # the same clean frames, new noise (and blackouts) per epoch
+            return _as_data(redraw_noise(clean_train, noise, FRESH_NOISE_SEED + epoch, spec["blackouts"]))
     res = train_model(config, _as_data(train), _as_data(val), cfg, folder / "models" / f"{name}-seed{seed}-{key}",
-                      data_key=key, progress=progress)
+                      data_key=key, progress=progress, fresh_train=fresh)
     return res, key
+
+
+# seeds of the per-epoch training noise: epoch e of every fresh-noise run draws FRESH_NOISE_SEED + e
+FRESH_NOISE_SEED = DATA_SEED * 1000
+
+
+def train_config(budget: dict, overrides: dict, seed: int) -> TrainConfig:
+    """The budget's schedule with a variant's ``train`` overrides (``fresh_noise`` is the data's
+    business; ``mse_warmup: "half"`` means half the budget's epochs)."""
+    fields = {"epochs": budget["epochs"], "lr": budget["lr"], "batch_size": budget["batch_size"]}
+    fields |= {k: v for k, v in overrides.items() if k != "fresh_noise"}
+    if fields.get("mse_warmup") == "half":
+        fields["mse_warmup"] = fields["epochs"] // 2
+    return TrainConfig(seed=seed, **fields)
 
 
 def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,

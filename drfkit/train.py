@@ -1,12 +1,18 @@
 """One training loop for every model of the book.
 
 Seeded, checkpointed every epoch (resumes after a kill with the same final result),
-best checkpoint kept on validation loss, non-finite losses stop the run with the
-step named. The loss is each model's own ``model.loss`` (Gaussian NLL over the
-sequence for the DRF family, relative Laplace for Monoloco).
+best checkpoint kept on a validation score (``select_on``), non-finite losses stop the run
+with the step named.
+
+What an epoch optimises is ``TrainConfig.objective`` (``drfkit.objectives``): the model's own
+loss by default (Gaussian NLL for the DRF family, relative Laplace for Monoloco), or beta-NLL,
+with an optional MSE warm-up; the learning rate is constant, stepped or cosine-annealed; the
+training data may be drawn afresh every epoch (``fresh_train``: new noise on the same clean
+frames) and cut into random windows. The validation loss recorded is always ``model.loss``.
 
 Determinism: the model is initialised under ``torch.manual_seed(seed)``; the batch order
-of epoch ``e`` comes from a generator seeded with ``(seed, e)``; the global RNG that
+and the windows of epoch ``e`` come from generators seeded with ``(seed, e)``, the fresh
+training data of epoch ``e`` from ``fresh_train(e)`` (the caller seeds it by epoch); the global RNG that
 drives dropout is saved in the checkpoint and restored on resume. So an interrupted
 and resumed run equals an uninterrupted one on CPU.
 """
@@ -17,11 +23,12 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import torch
 
 from drfkit.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
+from drfkit.objectives import objective_loss
 
 CHECKPOINT_FORMAT = 1
 
@@ -98,6 +105,12 @@ class TrainConfig:
     framewise: bool = False  # train on single frames (Monoloco)
     patience: int = 0  # stop after this many epochs without a better validation loss; 0 = never
     select_on: str = "loss"  # the epoch kept as -best.pt: lowest validation loss, or "l1" of the mean
+    objective: str = "model"  # drfkit.objectives: model (the model's own loss), nll, beta_nll, mse
+    beta: float = 1.0  # of beta_nll: 0 = the NLL, 1 = the mean fitted like MSE
+    mse_warmup: int = 0  # epochs of MSE on the mean before the objective (a staged fit)
+    lr_schedule: str = "step"  # step (StepLR by lr_step / lr_gamma; constant without lr_step) or cosine (to 0 at epochs)
+    weight_decay: float = 0.0  # decoupled (AdamW) when > 0
+    window: int | None = None  # train on one random window of this many frames per sequence and epoch
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
@@ -111,12 +124,29 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.select_on must be one of {SELECTION_METRICS}, got {self.select_on!r}")
         if self.grad_clip is not None and not self.grad_clip > 0:
             raise ValueError(f"TrainConfig.grad_clip must be > 0 or None (no clipping), got {self.grad_clip!r}")
+        from drfkit.objectives import OBJECTIVES
+
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"TrainConfig.objective must be one of {OBJECTIVES}, got {self.objective!r}")
+        if not 0.0 <= float(self.beta) <= 1.0:
+            raise ValueError(f"TrainConfig.beta must lie in [0, 1] (0 = NLL, 1 = mean fitted like MSE), got {self.beta!r}")
+        if not isinstance(self.mse_warmup, int) or isinstance(self.mse_warmup, bool) or self.mse_warmup < 0:
+            raise ValueError(f"TrainConfig.mse_warmup must be an integer >= 0 (epochs), got {self.mse_warmup!r}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"TrainConfig.lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
+        if not self.weight_decay >= 0:
+            raise ValueError(f"TrainConfig.weight_decay must be >= 0, got {self.weight_decay!r}")
+        if self.window is not None and (isinstance(self.window, bool) or not isinstance(self.window, int)
+                                        or self.window < 2):
+            raise ValueError(f"TrainConfig.window must be None (whole sequences) or an integer >= 2, got {self.window!r}")
 
 
 SELECTION_METRICS = ("loss", "l1")
+LR_SCHEDULES = ("step", "cosine")
 # Fields added after checkpoints were committed: at these values they stay out of names and
 # fingerprints, so every run made before them keeps its files (and resumes).
-LATER_FIELDS = {"select_on": "loss"}
+LATER_FIELDS = {"select_on": "loss", "objective": "model", "beta": 1.0, "mse_warmup": 0, "lr_schedule": "step",
+                "weight_decay": 0.0, "window": None}
 
 
 def _train_fields(cfg: "TrainConfig") -> dict[str, Any]:
@@ -189,8 +219,10 @@ STOPPING_FIELDS = ("epochs", "patience")
 
 
 def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -> str:
-    """What a resume must agree on: everything but ``STOPPING_FIELDS``."""
-    train = {k: v for k, v in _train_fields(train_cfg).items() if k not in STOPPING_FIELDS}
+    """What a resume must agree on: everything but ``STOPPING_FIELDS`` (a cosine schedule's
+    ``epochs`` stays: it sets every epoch's learning rate)."""
+    keep = ("epochs",) if train_cfg.lr_schedule == "cosine" else ()
+    train = {k: v for k, v in _train_fields(train_cfg).items() if k not in STOPPING_FIELDS or k in keep}
     return param_hash({"model": config, "train": train, "data": data_key})
 
 
@@ -221,12 +253,17 @@ def train_model(
     device: torch.device | str = "cpu",
     progress: bool = True,
     stop_after_epochs: int | None = None,
+    fresh_train: Callable[[int], SequenceData] | None = None,
 ) -> TrainResult:
     """Train ``build_model(model_config)``; checkpoints at ``<stem>-last.pt`` / ``<stem>-best.pt``.
 
     If ``<stem>-last.pt`` exists and was made by the same configuration (its fingerprint
     matches), training resumes from it; a finished run returns at once. ``stop_after_epochs``
     ends the call early (as an interruption would), used by tests and by time-boxed runs.
+    ``fresh_train(epoch)``, if given, returns the training data of that epoch (the same clean
+    sequences under new noise, drawn from a seed that depends on ``epoch`` alone, so a resumed run
+    sees what an uninterrupted one saw); ``train`` is then used only for its size. Whatever makes
+    it differ between runs belongs in ``data_key``.
 
     One writer per checkpoint: the call holds an OS lock on ``<stem>``; a second process gets a
     ``LockedError`` naming the holder (after LOCK_WAIT_S) and writes nothing. ``-last.pt`` also
@@ -237,7 +274,7 @@ def train_model(
     stem = Path(checkpoint_stem)
     with exclusive_lock(stem.parent / f".{stem.name}.lock", f"checkpoint {stem}", wait_s=LOCK_WAIT_S):
         return _train_locked(model_config, train, val, cfg, stem, data_key=data_key, device=device,
-                             progress=progress, stop_after_epochs=stop_after_epochs)
+                             progress=progress, stop_after_epochs=stop_after_epochs, fresh_train=fresh_train)
 
 
 def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None) -> None:
@@ -255,8 +292,36 @@ def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None)
     atomic_torch_save(best_path, best)
 
 
+def _optimiser(model, cfg: TrainConfig):
+    """Adam (AdamW when weight_decay > 0) and its schedule, stepped once per epoch."""
+    if cfg.weight_decay > 0:
+        optimiser = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    else:
+        optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    if cfg.lr_schedule == "cosine":
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=cfg.epochs, eta_min=0.0)
+    else:
+        scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
+    return optimiser, scheduler
+
+
+def random_windows(inputs: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor | None, window: int,
+                   generator: torch.Generator):
+    """One window of ``window`` consecutive frames per sequence, its start uniform in [0, T - window]:
+    (B, T, ...) -> (B, window, ...). Sequences no longer than ``window`` are returned whole."""
+    b, t = targets.shape[:2]
+    if t <= window:
+        return inputs, targets, mask
+    start = torch.randint(0, t - window + 1, (b,), generator=generator)
+    rows = torch.arange(b)[:, None]
+    cols = start[:, None] + torch.arange(window)[None, :]  # (B, window)
+    dev = targets.device
+    rows, cols = rows.to(dev), cols.to(dev)
+    return inputs[rows, cols], targets[rows, cols], None if mask is None else mask[rows, cols]
+
+
 def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, data_key, device, progress,
-                  stop_after_epochs) -> TrainResult:
+                  stop_after_epochs, fresh_train=None) -> TrainResult:
     from drfkit.models import build_model
 
     device = torch.device(device)
@@ -269,8 +334,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
 
     torch.manual_seed(cfg.seed)
     model = build_model(model_config).to(device)
-    optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
+    optimiser, scheduler = _optimiser(model, cfg)
     result = TrainResult(best_path=best_path, last_path=last_path)
     start_epoch, best = 0, None
 
@@ -315,13 +379,23 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
     for epoch in range(start_epoch, end_epoch):
         t0 = time.perf_counter()
         model.train()
-        order = _epoch_order(len(train), cfg.seed, epoch)
+        data = train
+        if fresh_train is not None:
+            data = fresh_train(epoch)
+            data = data.frames() if cfg.framewise else data
+            if len(data) != len(train):
+                raise ValueError(f"fresh_train({epoch}) gave {len(data)} training items, the run has {len(train)}")
+        order = _epoch_order(len(data), cfg.seed, epoch)
+        windows = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch + 50_000_017)
+        objective = "mse" if epoch < cfg.mse_warmup else cfg.objective
         total, count = 0.0, 0
-        for step, start in enumerate(range(0, len(train), cfg.batch_size)):
+        for step, start in enumerate(range(0, len(data), cfg.batch_size)):
             idx = order[start:start + cfg.batch_size]
-            inputs, targets, mask = train.batch(idx, device)
+            inputs, targets, mask = data.batch(idx, device)
+            if cfg.window is not None:
+                inputs, targets, mask = random_windows(inputs, targets, mask, cfg.window, windows)
             mean, sigma = model(inputs)
-            loss = model.loss(mean, sigma, targets, mask)
+            loss = objective_loss(model, objective, cfg.beta, mean, sigma, targets, mask)
             if not torch.isfinite(loss):
                 raise NonFiniteLossError(
                     f"non-finite loss {loss.item()} at epoch {epoch + 1}, step {step} (sequences "

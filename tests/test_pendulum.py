@@ -72,32 +72,55 @@ def test_theta_wrapped_to_minus_pi_pi():
 def test_theta_zero_is_drawn_below_the_pivot_and_positive_to_the_right():
     down = render_pendulum(np.array(0.0)).astype(float)
     assert down.shape == (24, 24)
-    assert down[12:].sum() > 10 * down[:12].sum()  # the round cap pokes behind the pivot
+    assert down[12:].sum() > 10 * down[:12].sum()  # the width and Lanczos' support poke behind the pivot
     right = render_pendulum(np.array(np.pi / 2)).astype(float)
     assert right[:, 12:].sum() > 10 * right[:, :12].sum()
     up = render_pendulum(np.array(np.pi)).astype(float)
     assert up[:12].sum() > 10 * up[12:].sum()
 
 
-def test_rendering_is_anti_aliased_and_uses_the_full_range():
+def test_frames_carry_the_benchmarks_ink_not_an_anti_aliased_lines():
+    """The RKN recipe (PIL float canvas, hard 8-px line, Lanczos to 24 x 24, clip, x255, truncate)
+    gives a mean intensity sum of 4040 over random angles; the former OpenCV anti-aliased line
+    with round caps gave 5192. A renderer that drifts from the recipe moves this by far more than 1 %."""
+    theta = np.random.default_rng(0).uniform(-np.pi, np.pi, 500)
+    ink = render_pendulum(theta).reshape(500, -1).astype(np.float64).sum(axis=1)
+    assert abs(ink.mean() - 4040) < 0.01 * 4040
+    assert ink.std() < 0.05 * ink.mean()  # a rod has about the same ink at every angle
+
+
+def test_the_pivot_sits_at_the_image_centre():
+    """Hanging straight down, the rod's ink is centred on canvas pixel 64 (PIL fills the pixels
+    around index 64, centre 64.5), i.e. column 64.5 * 24 / 128 - 0.5 = 11.59 of the small image,
+    and starts at the pivot row."""
+    down = render_pendulum(np.array(0.0)).astype(np.float64)
+    columns = down.sum(axis=0)
+    centre = (columns * np.arange(24)).sum() / columns.sum()
+    assert abs(centre - 11.59) < 0.03
+    rows = down.sum(axis=1)
+    assert rows[:10].sum() < 0.02 * rows.sum() and rows[12:22].min() > 0.5 * rows.max()
+
+
+def test_truncation_not_rounding_and_the_full_range():
     image = render_pendulum(np.array(0.3))
     assert image.dtype == np.uint8
     assert image.max() > 200
-    # Anti-aliasing leaves intermediate grey levels along the edges.
+    # Lanczos leaves intermediate grey levels along the edges.
     assert np.count_nonzero((image > 20) & (image < 200)) >= 10
 
 
 def test_estimate_angle_recovers_the_rendered_angle():
+    """The hard-edged rod is not symmetric about its axis: its centroid is within 2.5 degrees."""
     theta = np.linspace(-np.pi, np.pi, 360, endpoint=False)
     error = np.degrees(np.abs(_wrap(estimate_angle(render_pendulum(theta)) - theta)))
-    assert error.max() < 1.0
+    assert error.max() < 2.5 and error.mean() < 1.0
 
 
 def test_estimate_angle_agrees_with_targets_on_generated_data():
     data = generate_pendulum(8, 20, Noise("rkn_uniform", 0.5), seed=3)
     estimate = estimate_angle(data["clean"])
     target_angle = np.arctan2(data["targets"][..., 1], data["targets"][..., 0])
-    assert np.degrees(np.abs(_wrap(estimate - target_angle))).max() < 1.0
+    assert np.degrees(np.abs(_wrap(estimate - target_angle))).max() < 2.5
 
 
 def test_estimate_angle_black_image_is_nan_and_checks_input():

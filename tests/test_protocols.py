@@ -28,7 +28,8 @@ def test_every_protocol_names_a_variant_per_model():
         assert set(kinds) == {"drf", "no_dynamics", "lstm"}
         for kind, variant in kinds.items():
             assert VARIANTS[variant]["kind"] == kind
-    assert protocol_spec("paper", "drf") == {"kind": "drf", "model": {}, "blackouts": None, "train_max_noise": 0.5}
+    assert protocol_spec("paper", "drf") == {"kind": "drf", "model": {}, "blackouts": None, "train_max_noise": 0.5,
+                                             "train": {}}
     with pytest.raises(ValueError, match="unknown protocol"):
         protocol_spec("fancy", "drf")
     with pytest.raises(ValueError, match="unknown variant"):
