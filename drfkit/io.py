@@ -110,20 +110,129 @@ def atomic_torch_save(path: str | os.PathLike, obj: Any) -> Path:
     return atomic_write_bytes(path, buf.getvalue())
 
 
+class UnsafeArtefactError(RuntimeError):
+    """A file holds something a data-only loader refuses (code to run on load); it was not run."""
+
+
 def torch_load_checked(path: str | os.PathLike) -> Any:
-    """``torch.load`` that turns a missing or damaged file into one clear error."""
+    """Load a checkpoint, resume state or cache entry with PyTorch's safe loader.
+
+    ``weights_only=True``: only tensors, plain Python values and containers of them are rebuilt;
+    a pickled object that would import a global or call a function on load (an ``os.system`` in a
+    ``__reduce__``) is refused before anything runs, with ``UnsafeArtefactError`` naming the file
+    and what was refused. A missing file raises ``FileNotFoundError``, a damaged one
+    ``CorruptArtefactError``. Every file the book writes holds plain data and loads here.
+    """
+    import pickle
+
     import torch
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist")
     try:
-        return torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # truncated zip, pickle error, ...
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        text = str(exc)
+        if "weights_only" in text or "Unsupported" in text or "global" in text.lower():
+            refused = next((line.strip() for line in text.splitlines() if "Unsupported" in line or "GLOBAL" in line),
+                           text.splitlines()[0] if text else "an object that is not plain data")
+            raise UnsafeArtefactError(
+                f"refused to load {path}: it holds more than tensors and plain values ({refused}); "
+                "nothing in it was run. Only load files you trust; the book's own files never need this -- "
+                "delete it and rerun what wrote it") from None
+        raise CorruptArtefactError(
+            f"checkpoint {path} is truncated or corrupt (UnpicklingError: {exc}); "
+            "delete it and rerun the notebook that wrote it") from exc
+    except Exception as exc:  # truncated zip, ...
         raise CorruptArtefactError(
             f"checkpoint {path} is truncated or corrupt ({type(exc).__name__}: {exc}); "
             "delete it and rerun the notebook that wrote it"
         ) from exc
+
+
+# ------------------------------------------------------------------ data-only JSON documents
+# The measurement cache stores tables, arrays and plain values as JSON (never pickle): reading a
+# file rebuilds data and can run nothing. Floats are written with repr, so a value comes back
+# bit for bit (nan and inf included, as JSON's NaN / Infinity extension).
+
+def to_data(obj: Any) -> Any:
+    """A JSON-able tagged form of plain values, lists, tuples, dicts, numpy arrays and scalars,
+    torch tensors (CPU), pandas DataFrames and Series; anything else raises ``TypeError``."""
+    import pandas as pd
+
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    if isinstance(obj, float):
+        return obj
+    if isinstance(obj, np.generic):
+        return {"__scalar__": obj.dtype.str, "value": to_data(obj.item())}
+    if type(obj).__module__ == "torch" and type(obj).__name__ == "Tensor":
+        array = obj.detach().cpu().numpy()
+        return {"__tensor__": to_data(array)}
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.kind not in "biufU":
+            raise TypeError(f"cannot store an array of dtype {obj.dtype} as data")
+        return {"__array__": obj.dtype.str, "shape": list(obj.shape), "values": [to_data(v) for v in obj.reshape(-1).tolist()]}
+    if isinstance(obj, pd.DataFrame):
+        return {"__frame__": {"columns": [to_data(c) for c in obj.columns], "dtypes": [str(d) for d in obj.dtypes],
+                              "index": to_data(obj.index.to_frame(index=False).to_dict("list") if obj.index.nlevels > 1
+                                               else obj.index.tolist()),
+                              "index_names": [to_data(n) for n in obj.index.names], "multi": obj.index.nlevels > 1,
+                              "values": [to_data(obj.iloc[:, i].tolist()) for i in range(obj.shape[1])]}}
+    if isinstance(obj, pd.Series):
+        return {"__series__": to_data(obj.to_frame(name=obj.name if obj.name is not None else "__value__"))}
+    if isinstance(obj, tuple):
+        return {"__tuple__": [to_data(v) for v in obj]}
+    if isinstance(obj, list):
+        return [to_data(v) for v in obj]
+    if isinstance(obj, dict):
+        return {"__dict__": [[to_data(k), to_data(v)] for k, v in obj.items()]}
+    raise TypeError(f"cannot store a {type(obj).__module__}.{type(obj).__qualname__} as data")
+
+
+def from_data(obj: Any) -> Any:
+    """The inverse of ``to_data``; an unknown tag raises ``CorruptArtefactError``."""
+    import pandas as pd
+
+    if isinstance(obj, list):
+        return [from_data(v) for v in obj]
+    if not isinstance(obj, dict):
+        return obj
+    if "__tuple__" in obj:
+        return tuple(from_data(v) for v in obj["__tuple__"])
+    if "__dict__" in obj:
+        return {_hashable(from_data(k)): from_data(v) for k, v in obj["__dict__"]}
+    if "__tensor__" in obj:
+        import torch
+
+        return torch.from_numpy(np.ascontiguousarray(from_data(obj["__tensor__"])))
+    if "__scalar__" in obj:
+        return np.dtype(obj["__scalar__"]).type(from_data(obj["value"]))
+    if "__array__" in obj:
+        return np.array(from_data(obj["values"]), dtype=np.dtype(obj["__array__"])).reshape(obj["shape"])
+    if "__frame__" in obj:
+        f = obj["__frame__"]
+        columns = [_hashable(from_data(c)) for c in f["columns"]]
+        data = {i: pd.Series(from_data(v), dtype=d if d != "object" else object)
+                for i, (v, d) in enumerate(zip(f["values"], f["dtypes"]))}
+        frame = pd.DataFrame(data) if data else pd.DataFrame(index=range(len(from_data(f["index"]))))
+        index = from_data(f["index"])
+        names = [from_data(n) for n in f["index_names"]]
+        frame.index = (pd.MultiIndex.from_frame(pd.DataFrame(index), names=names) if f["multi"]
+                       else pd.Index(index, name=names[0]))
+        frame.columns = (pd.MultiIndex.from_tuples(columns) if columns and all(isinstance(c, tuple) for c in columns)
+                         else pd.Index(columns))
+        return frame
+    if "__series__" in obj:
+        frame = from_data(obj["__series__"])
+        series = frame.iloc[:, 0]
+        return series.rename(None if frame.columns[0] == "__value__" else frame.columns[0])
+    raise CorruptArtefactError(f"unknown data tag in {sorted(obj)[:3]}")
+
+
+def _hashable(value: Any) -> Any:
+    return tuple(_hashable(v) for v in value) if isinstance(value, list) else value
 
 
 def atomic_save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> Path:

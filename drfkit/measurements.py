@@ -15,8 +15,9 @@ not a fact, so its reuse is said where the reader looks (one line per call, and 
 notebook's manifest entry lists what was reused); ``DRFKIT_REMEASURE=1`` in the environment
 (``make reproduce REMEASURE=1``, ``python -m drfkit.pipeline --remeasure``) measures and
 computes everything again and overwrites the entries. Files live in
-``results/<profile>/measurements/`` (not committed), written atomically; a damaged one is
-computed again.
+``results/<profile>/measurements/`` (not committed), written atomically as data-only JSON
+(``drfkit.io.to_data``: tables, arrays, plain values; reading one can run no code); a damaged
+or foreign one is computed again, and said so.
 
     speed = cached(P.profile, training_step_times, configs, x, y, n_batches_per_epoch=20, timing=True)
 """
@@ -26,7 +27,8 @@ import dataclasses
 import functools
 import hashlib
 import os
-import pickle
+import json
+import sys
 import platform
 import time
 import types
@@ -37,11 +39,11 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from drfkit.io import atomic_write_bytes, param_hash
+from drfkit.io import atomic_write_text, from_data, param_hash, to_data
 from drfkit.manifest import cpu_name, note_reused, reused_measurements as reused
 from drfkit.paths import REPO_ROOT, results_dir
 
-FORMAT = 1
+FORMAT = 2  # 2: JSON data (1 was a pickle, never read again)
 REMEASURE_ENV = "DRFKIT_REMEASURE"
 
 
@@ -138,26 +140,34 @@ def cached(profile: str | None, fn: Callable, *args: Any, timing: bool, **kwargs
     name = f"{fn.__module__}.{fn.__qualname__}"
     path = None
     if profile is not None:
-        path = measurements_dir(profile) / f"{fn.__name__}-{key(fn, args, kwargs, with_machine=timing)}.pkl"
+        path = measurements_dir(profile) / f"{fn.__name__}-{key(fn, args, kwargs, with_machine=timing)}.json"
     if path is not None and path.exists() and not remeasure_requested():
         try:
-            stored = pickle.loads(path.read_bytes())
+            stored = json.loads(path.read_text())
             if stored.get("format") == FORMAT and stored.get("fn") == name:
+                value = from_data(stored["value"])
                 what = "measured on this machine" if timing else "computed with this code"
                 print(f"{fn.__name__}: reused, {what} at {stored['when']} in {stored['seconds']:.0f} s "
                       f"({REMEASURE_ENV}=1 or make reproduce REMEASURE=1 to redo it)", flush=True)
                 note_reused({"fn": name, "when": stored["when"], "seconds": stored["seconds"],
                                 "timing": timing, "file": path.name})
-                return stored["value"]
-        except Exception:  # noqa: BLE001 -- a damaged entry of any kind is computed again below
-            pass
+                return value
+        except Exception as exc:  # noqa: BLE001 -- a damaged or foreign entry is computed again below
+            print(f"warning: measurement cache entry {path} is not a data-only entry of this code "
+                  f"({type(exc).__name__}); computing it again", file=sys.stderr)
     t0 = time.perf_counter()
     value = fn(*args, **kwargs)
     seconds = time.perf_counter() - t0
     if path is not None:
         when = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        atomic_write_bytes(path, pickle.dumps({"format": FORMAT, "fn": name, "value": value, "when": when,
-                                               "seconds": round(seconds, 2), "machine": machine_fingerprint()}))
+        try:
+            document = json.dumps({"format": FORMAT, "fn": name, "value": to_data(value), "when": when,
+                                   "seconds": round(seconds, 2), "machine": machine_fingerprint()})
+        except TypeError as exc:
+            print(f"warning: {fn.__name__} returned what the measurement cache cannot store as data ({exc}); "
+                  "not cached", file=sys.stderr)
+        else:
+            atomic_write_text(path, document)
     return value
 
 

@@ -36,7 +36,7 @@ def results_in_tmp(tmp_path, monkeypatch):
 
 
 def entries(profile="p"):
-    return sorted(measurements.measurements_dir(profile).glob("*.pkl"))
+    return sorted(measurements.measurements_dir(profile).glob("*.json"))
 
 
 def test_a_second_call_reuses_the_value_exactly_and_says_so(capsys):
@@ -120,7 +120,7 @@ def test_a_damaged_entry_is_computed_again():
 def test_profile_none_switches_the_cache_off(tmp_path):
     cached(None, slow_study, torch.ones(2), {"name": "a"}, timing=False)
     cached(None, slow_study, torch.ones(2), {"name": "a"}, timing=False)
-    assert len(CALLS) == 2 and not list(tmp_path.rglob("*.pkl"))
+    assert len(CALLS) == 2 and not list(tmp_path.rglob("*.json"))
 
 
 def test_fingerprint_follows_content():

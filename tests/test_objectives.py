@@ -1,0 +1,143 @@
+"""Training objectives and schedules (drfkit.objectives, drfkit.train) on small known cases."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from drfkit.data.noise import Noise
+from drfkit.data.pendulum import generate_pendulum, redraw_noise
+from drfkit.io import torch_load_checked
+from drfkit.models import gaussian_nll
+from drfkit.objectives import beta_nll, mse, objective_loss
+from drfkit.studies import model_config
+from drfkit.train import SequenceData, TrainConfig, fingerprint, random_windows, train_model
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def values(seed=0, shape=(3, 4, 2)):
+    g = torch.Generator().manual_seed(seed)
+    mean = torch.randn(shape, generator=g, requires_grad=True)
+    sigma = (0.05 + torch.rand(shape, generator=g)).requires_grad_(True)
+    targets = torch.randn(shape, generator=g)
+    mask = torch.rand(shape[:2], generator=g) > 0.3
+    mask[0, 0] = True
+    return mean, sigma, targets, mask
+
+
+def test_beta_zero_is_the_nll():
+    mean, sigma, targets, mask = values()
+    torch.testing.assert_close(beta_nll(mean, sigma, targets, mask, beta=0.0), gaussian_nll(mean, sigma, targets, mask))
+
+
+def test_beta_one_gives_the_mean_the_gradient_of_half_squared_error():
+    """d/dmu [stopgrad(sigma^2) * (y - mu)^2 / (2 sigma^2)] = mu - y, whatever sigma is: the mean is
+    fitted like MSE (a mutation that forgets the stop-gradient or uses sigma^beta fails this)."""
+    mean, sigma, targets, mask = values(1)
+    beta_nll(mean, sigma, targets, mask, beta=1.0).backward()
+    n_valid = int(mask.sum()) * mean.shape[-1]
+    expected = torch.where(mask.unsqueeze(-1), (mean - targets).detach(), 0.0) / n_valid
+    torch.testing.assert_close(mean.grad, expected)
+    # sigma still learns: its gradient is the NLL's, scaled by sigma^2
+    s = sigma.detach().clone().requires_grad_(True)
+    gaussian_nll(mean.detach(), s, targets, mask).backward()
+    torch.testing.assert_close(sigma.grad, s.grad * sigma.detach() ** 2)
+
+
+def test_half_beta_weights_by_sigma():
+    mean, sigma, targets, mask = values(2)
+    beta_nll(mean, sigma, targets, mask, beta=0.5).backward()
+    n_valid = int(mask.sum()) * mean.shape[-1]
+    expected = torch.where(mask.unsqueeze(-1), (mean - targets) / sigma, 0.0).detach() / n_valid
+    torch.testing.assert_close(mean.grad, expected)
+
+
+def test_mse_fits_only_the_mean():
+    mean, sigma, targets, mask = values(3)
+    loss = mse(mean, sigma, targets, mask)
+    valid = mask.unsqueeze(-1).expand_as(mean)
+    assert float(loss) == pytest.approx(float((0.5 * (targets - mean) ** 2)[valid].mean()), rel=1e-6)
+    loss.backward()
+    assert sigma.grad is None
+
+
+def test_bad_objectives_are_refused():
+    mean, sigma, targets, mask = values()
+    with pytest.raises(ValueError, match="beta"):
+        beta_nll(mean, sigma, targets, mask, beta=1.5)
+    with pytest.raises(ValueError, match="objective"):
+        objective_loss(None, "hinge", 1.0, mean, sigma, targets, mask)
+    for bad in (dict(objective="hinge"), dict(beta=-0.1), dict(mse_warmup=-1), dict(lr_schedule="linear"),
+                dict(weight_decay=-1.0), dict(window=1)):
+        with pytest.raises(ValueError, match="TrainConfig"):
+            TrainConfig(epochs=1, lr=1e-3, batch_size=1, seed=0, **bad)
+
+
+def test_random_windows_cut_consecutive_frames_per_sequence():
+    x = torch.arange(4 * 10).reshape(4, 10, 1, 1).expand(4, 10, 2, 2)
+    y = torch.arange(4 * 10, dtype=torch.float32).reshape(4, 10, 1)
+    xw, yw, mw = random_windows(x, y, None, 3, torch.Generator().manual_seed(0))
+    assert xw.shape == (4, 3, 2, 2) and yw.shape == (4, 3, 1) and mw is None
+    steps = yw[:, 1:, 0] - yw[:, :-1, 0]
+    assert torch.equal(steps, torch.ones_like(steps))  # consecutive
+    assert torch.equal(yw[:, 0, 0] // 10, torch.arange(4, dtype=torch.float32))  # each from its own sequence
+    assert torch.equal(xw[:, :, 0, 0].float(), yw[..., 0])
+
+
+def test_cosine_schedule_reaches_zero_and_its_epochs_enter_the_fingerprint():
+    cfg = TrainConfig(epochs=4, lr=1e-2, batch_size=4, seed=0, lr_schedule="cosine")
+    longer = TrainConfig(epochs=8, lr=1e-2, batch_size=4, seed=0, lr_schedule="cosine")
+    assert fingerprint({}, cfg, "d") != fingerprint({}, longer, "d")
+    step = TrainConfig(epochs=4, lr=1e-2, batch_size=4, seed=0)
+    assert fingerprint({}, step, "d") == fingerprint({}, TrainConfig(epochs=8, lr=1e-2, batch_size=4, seed=0), "d")
+
+
+def _fresh_setup():
+    arrays = generate_pendulum(8, 12, Noise("rkn_uniform", 0.5), seed=3)
+    val = generate_pendulum(4, 12, Noise("rkn_uniform", 0.5), seed=4)
+
+    def as_data(a):
+        return SequenceData(torch.from_numpy(a["images"]), torch.from_numpy(a["targets"]))
+
+    def fresh(epoch):
+        return as_data(redraw_noise(arrays, Noise("rkn_uniform", 0.5), 100 + epoch,
+                                    {"fraction": 0.5, "lengths": (2, 4)}))
+
+    return as_data(arrays), as_data(val), fresh
+
+
+def test_fresh_noise_resumed_run_equals_uninterrupted_bit_for_bit(tmp_path):
+    train, val, fresh = _fresh_setup()
+    cfg = model_config("pendulum", "drf")
+    tc = TrainConfig(epochs=4, lr=3e-3, batch_size=4, seed=0, objective="beta_nll", lr_schedule="cosine",
+                     window=6, mse_warmup=1, select_on="l1", weight_decay=1e-4)
+    a = train_model(cfg, train, val, tc, tmp_path / "a", progress=False, fresh_train=fresh)
+    b1 = train_model(cfg, train, val, tc, tmp_path / "b", progress=False, fresh_train=fresh, stop_after_epochs=2)
+    assert len(b1.history) == 2
+    b2 = train_model(cfg, train, val, tc, tmp_path / "b", progress=False, fresh_train=fresh)
+    assert b2.resumed_from == 2
+    assert [h["train_loss"] for h in a.history] == [h["train_loss"] for h in b2.history]
+    sa, sb = torch_load_checked(a.last_path)["model"], torch_load_checked(b2.last_path)["model"]
+    assert all(torch.equal(sa[k], sb[k]) for k in sa)
+    assert math.isclose(a.history[-1]["lr"], 0.0, abs_tol=1e-12)  # cosine to 0 at the last epoch
+    # the noise really is new each epoch, on the same clean frames
+    e0, e1 = fresh(0), fresh(1)
+    assert not torch.equal(e0.inputs, e1.inputs) and torch.equal(e0.targets, e1.targets)
+    assert torch.equal(fresh(0).inputs, e0.inputs)
+
+
+def test_redraw_noise_keeps_clean_frames_and_targets():
+    arrays = generate_pendulum(5, 10, Noise("rkn_uniform", 0.5), seed=1)
+    new = redraw_noise(arrays, Noise("rkn_uniform", 0.5), seed=7)
+    assert np.array_equal(new["clean"], arrays["clean"]) and np.array_equal(new["targets"], arrays["targets"])
+    assert new["noise"].max() <= 0.5 and (new["noise"][:, :5] == 0).all()  # the benchmark's clean first frames
+    assert not np.array_equal(new["images"], arrays["images"])
+    with pytest.raises(ValueError, match="rkn_uniform"):
+        redraw_noise(arrays, Noise("salt_and_pepper", 0.5), seed=7)
