@@ -7,6 +7,7 @@ leaves a half-written file that a later step would trust.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import hashlib
 import io
@@ -35,10 +36,13 @@ class LockedError(RuntimeError):
 
 
 @contextlib.contextmanager
-def exclusive_lock(path: str | os.PathLike, what: str, wait_s: float = 0.0):
+def exclusive_lock(path: str | os.PathLike, what: str, wait_s: float = 0.0, announce_stale: bool = False):
     """Hold an OS lock (``flock``) on ``path`` for the block; if another process holds it after
-    ``wait_s`` seconds, raise ``LockedError`` naming that process. The lock dies with its process
-    (kill -9 included), so a crashed writer never leaves a lock behind; the file stays, harmless."""
+    ``wait_s`` seconds, raise ``LockedError`` naming that process (PID and host). The lock dies with
+    its process (kill -9 included), so a crashed writer never leaves a lock behind; the file stays,
+    harmless. The file names the holder while the lock is held and is emptied on a normal exit, so a
+    holder's name found on taking the lock means that process died holding it (``announce_stale``:
+    say so in one line on stderr)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fh = open(path, "a+")
@@ -56,12 +60,25 @@ def exclusive_lock(path: str | os.PathLike, what: str, wait_s: float = 0.0):
                                       "finished or stop it -- this process wrote nothing") from None
                 time.sleep(0.2)
         fh.seek(0)
+        stale = fh.read().strip()
+        if stale and announce_stale:
+            import sys
+
+            print(f"{what}: taking over the lock {path} from {stale}, which stopped without releasing it "
+                  "(killed?)", file=sys.stderr, flush=True)
+        fh.seek(0)
         fh.truncate()
         fh.write(f"process {os.getpid()} on {socket.gethostname()}")
         fh.flush()
         yield
+        fh.seek(0)
+        fh.truncate()  # released normally: nobody to report next time
     finally:
         fh.close()  # closing the file releases the lock
+
+
+class DiskFullError(OSError):
+    """A write ran out of space (ENOSPC); the previous file is intact."""
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -76,9 +93,13 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+            raise DiskFullError(errno.ENOSPC, f"no space left on the device while writing {path}; the previous "
+                                f"version of it (if any) is intact and nothing half-written was left. Free space "
+                                f"(df -h {path.parent}) and rerun the same command") from exc
         raise
     return path
 

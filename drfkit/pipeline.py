@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from drfkit.io import atomic_write_bytes, param_hash
+from drfkit.io import atomic_write_bytes, exclusive_lock, param_hash
 from drfkit.manifest import now_iso, read_manifest, record_cell_times, record_notebook, update_manifest
 from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
 from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
@@ -35,7 +35,8 @@ from drfkit.progress import Echo
 # What a notebook run may leave half-rewritten: everything under results/<profile>/ except the
 # checkpoints (written atomically per epoch and resumable), the data caches (hashed by their
 # parameters) and the manifest (which records the interruption itself).
-UNSNAPSHOTTED = ("models", "data", "ablation", "predictions", "manifest.json")
+UNSNAPSHOTTED = ("models", "data", "ablation", "predictions", "measurements", "manifest.json", ".snapshot",
+                 ".pipeline.lock")
 
 
 def notebook_path(name: str) -> Path:
@@ -111,7 +112,7 @@ def _resumable(manifest: dict, name: str, params_key: str, code: str) -> bool:
     and code is not run again."""
     status = str(manifest.get("pipeline", {}).get("status", ""))
     entry = manifest.get("pipeline", {}).get("finished_notebooks", {}).get(name, {})
-    return (status.startswith(("interrupted", "failed")) and entry.get("params") == params_key
+    return (status.startswith(("interrupted", "failed", "killed")) and entry.get("params") == params_key
             and entry.get("code") == code)
 
 
@@ -126,8 +127,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
         raise ParameterError(f"unknown notebook(s) {sorted(set(only) - set(NOTEBOOKS))}; known: {list(NOTEBOOKS)}")
     per_notebook = {name: notebook_params(name, values) for name in names}  # all errors before any run
     root, out_dir = results_dir(profile_name), results_dir(profile_name, "executed")
-    previous = read_manifest(profile_name)
-    finished = dict(previous.get("pipeline", {}).get("finished_notebooks", {}))
+    previous, finished = {}, {}  # read under the lock, after a killed run was undone
     started, t0 = now_iso(), time.perf_counter()
     durations: dict[str, float] = {}
 
@@ -137,6 +137,72 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                                   "total_s": round(time.perf_counter() - t0, 1) if finished_at else None,
                                   "durations_s": durations, "notebooks": names, "finished_notebooks": finished})
 
+    with exclusive_lock(root / PIPELINE_LOCK, f"profile {profile_name} (results {root})", announce_stale=True):
+        recover_after_kill(root, profile_name)
+        previous = read_manifest(profile_name)
+        finished.update(previous.get("pipeline", {}).get("finished_notebooks", {}))
+        os.environ[PIPELINE_ENV] = str(root.resolve())  # the notebooks' kernels run under this lock
+        try:
+            return _run_locked(profile, profile_name, names, per_notebook, values, overrides, kernel, pm,
+                               root, out_dir, previous, finished, started, t0, durations, record)
+        finally:
+            os.environ.pop(PIPELINE_ENV, None)
+
+
+# One pipeline per profile: an OS lock on results/<profile>/.pipeline.lock (drfkit.io.exclusive_lock);
+# a notebook started on its own takes it too (drfkit.runtime), unless its pipeline holds it (this
+# variable, inherited by the kernels, names the results folder the parent pipeline has locked).
+PIPELINE_LOCK = ".pipeline.lock"
+PIPELINE_ENV = "DRFKIT_PIPELINE_HOLDS"
+SNAPSHOT_DIR = ".snapshot"  # the outputs before the running notebook, on disk until it ends
+
+
+def save_snapshot(root: Path, name: str, snapshot: dict[Path, bytes]) -> Path:
+    """Write ``snapshot`` to ``root/.snapshot/<name>.zip`` (atomically), so that a pipeline killed
+    with SIGKILL can still be undone by the next start (``recover_after_kill``)."""
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path, data in snapshot.items():
+            zf.writestr(path.relative_to(root).as_posix(), data)
+    return atomic_write_bytes(root / SNAPSHOT_DIR / f"{name}.zip", buf.getvalue())
+
+
+def recover_after_kill(root: Path, profile_name: str) -> str | None:
+    """At the start of a pipeline (lock held): a snapshot left on disk, or a manifest left
+    ``running``, means the previous pipeline was killed (SIGKILL, out of memory) mid-notebook. Put
+    that notebook's outputs back from its snapshot, mark it ``killed`` in the manifest, say so in one
+    line; returns the notebook's name, or None if nothing was left."""
+    import zipfile
+
+    snapshots = sorted((root / SNAPSHOT_DIR).glob("*.zip"))
+    manifest = read_manifest(profile_name)
+    running = [n for n, e in manifest.get("notebooks", {}).items() if e.get("status") == "running"]
+    if not snapshots and not running:
+        return None
+    name = snapshots[0].stem if snapshots else running[0]
+    restored = ""
+    if snapshots:
+        with zipfile.ZipFile(snapshots[0]) as zf:
+            before = {root / member: zf.read(member) for member in zf.namelist()}
+        restore_outputs(root, before)
+        snapshots[0].unlink()
+        restored = "its outputs were put back from the snapshot taken before it started; "
+    (root / "executed" / f".{name}.partial.ipynb").unlink(missing_ok=True)
+    if name in manifest.get("notebooks", {}):
+        record_notebook(profile_name, name, status="killed", finished=None)
+    pipeline = manifest.get("pipeline")
+    if pipeline and pipeline.get("status") == "running":
+        update_manifest(profile_name, pipeline=pipeline | {"status": f"killed in {name}"})
+    print(f"== the previous run on profile {profile_name} was killed in {name}: {restored}continuing",
+          file=sys.stderr, flush=True)
+    return name
+
+
+def _run_locked(profile, profile_name, names, per_notebook, values, overrides, kernel, pm, root, out_dir,
+                previous, finished, started, t0, durations, record) -> int:
     record("running")
     handlers = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
@@ -151,6 +217,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
             t = time.perf_counter()
             final, partial = out_dir / f"{name}.ipynb", out_dir / f".{name}.partial.ipynb"
             before = snapshot_outputs(root)
+            save_snapshot(root, name, before)
             try:
                 # papermill rewrites its output after every cell: run into a partial file and move it
                 # into place when done, so a killed run never leaves a half-executed notebook behind;
@@ -165,6 +232,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                 _stop_descendants()
                 partial.unlink(missing_ok=True)
                 restore_outputs(root, before)
+                (root / SNAPSHOT_DIR / f"{name}.zip").unlink(missing_ok=True)
                 durations[name] = round(time.perf_counter() - t, 1)
                 record_notebook(profile_name, name, status="interrupted", finished=now_iso())
                 record(f"interrupted in {name}", now_iso())
@@ -177,6 +245,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                 if partial.exists():
                     os.replace(partial, failed)  # complete up to the failing cell, which shows the error
                 restore_outputs(root, before | {failed: failed.read_bytes()} if failed.exists() else before)
+                (root / SNAPSHOT_DIR / f"{name}.zip").unlink(missing_ok=True)
                 durations[name] = round(time.perf_counter() - t, 1)
                 record_notebook(profile_name, name, status="failed", finished=now_iso())
                 record(f"failed in {name}", now_iso())
@@ -184,6 +253,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                       f"{failed}; the other outputs are as they were before it started\n{exc}", file=sys.stderr)
                 return 1
             os.replace(partial, final)
+            (root / SNAPSHOT_DIR / f"{name}.zip").unlink(missing_ok=True)
             record_cell_times(profile_name, name, final)
             (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
             durations[name] = round(time.perf_counter() - t, 1)

@@ -49,5 +49,27 @@ def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Params, No
     """
     params = validate(notebook, notebook_globals(namespace))
     setup(params.threads, params.seeds[0], params.device)
+    hold_profile(params.profile)
     timer = NotebookTimer(params.profile, notebook, params.as_dict())
     return params, timer
+
+
+_HELD: dict[str, Any] = {}  # results folder -> the lock a notebook run on its own holds for its kernel's life
+
+
+def hold_profile(profile: str) -> None:
+    """One writer per profile: a notebook run on its own (Jupyter, nbval) takes the profile's
+    pipeline lock for the life of its kernel, so a pipeline or another notebook on the same profile
+    is refused (``LockedError`` with the holder's PID and host) before anything is written. Under
+    ``drfkit.pipeline`` the parent already holds it (``DRFKIT_PIPELINE_HOLDS``)."""
+    from drfkit.paths import results_dir
+    from drfkit.pipeline import PIPELINE_ENV, PIPELINE_LOCK
+
+    root = results_dir(profile)
+    if os.environ.get(PIPELINE_ENV) == str(root.resolve()) or str(root.resolve()) in _HELD:
+        return
+    from drfkit.io import exclusive_lock
+
+    lock = exclusive_lock(root / PIPELINE_LOCK, f"profile {profile} (results {root})", announce_stale=True)
+    lock.__enter__()  # released when the kernel exits (the OS drops the flock with the process)
+    _HELD[str(root.resolve())] = lock
