@@ -275,3 +275,25 @@ def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
     assert asked == [("val", 0.75), ("val", 0.75)]
     with pytest.raises(ValueError, match="rkn_uniform"):  # the pedestrians' kind is not the pendulum's
         dynamics.mechanism_table(P, {}, Noise("salt_and_pepper", 0.05))
+
+
+def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
+    """Like for like: the true-physics bound's blackout MAE is taken over the blackout frames alone,
+    as every model's (``blackout_table``); a bound averaged over all 75 frames fails this."""
+    from drfkit.data.noise import Noise
+    from drfkit.data.pendulum import blackout_frames, generate_pendulum, with_blackout
+    from drfkit.dynamics import blackout_table, bound_on
+
+    val = generate_pendulum(4, 60, Noise("rkn_uniform", 0.5), seed=5)
+    dark = with_blackout(generate_pendulum(3, 60, Noise("rkn_uniform", 0.5), seed=6), *blackout_frames(60), seed=1)
+    rng = np.random.default_rng(0)
+
+    def predict(arrays):  # a per-frame encoder: the truth plus noise, useless on pure-noise frames
+        noisy = arrays["targets"] + rng.normal(0, 0.05, arrays["targets"].shape) * (1 + 20 * arrays["noise"][..., None])
+        return noisy.astype(np.float32), np.full(arrays["targets"].shape, 0.1, np.float32)
+
+    table, curves = bound_on(predict, val, {"blackout": dark}, n_particles=50, seed=0)
+    bound = table.set_index("noise").loc["blackout"]
+    as_model = blackout_table(curves.assign(seed=0))
+    assert bound["mae"] == pytest.approx(float(as_model["mae_blackout"].iloc[0]), rel=1e-12)
+    assert bound["mae"] != pytest.approx(bound["mae_all_frames"], rel=1e-3)  # the frames do matter here

@@ -105,3 +105,28 @@ def test_snapshot_and_restore_leave_checkpoints_alone(tmp_path):
     assert sorted(p.name for p in changed) == ["a.csv", "b.csv"]
     assert (tmp_path / "tables" / "a.csv").read_text() == "a" and not (tmp_path / "tables" / "b.csv").exists()
     assert (tmp_path / "models" / "m-last.pt").exists()
+
+
+def test_a_changed_code_hash_voids_the_rerun_skip(tmp_path, monkeypatch):
+    """After an interruption a finished notebook is skipped only if its code is unchanged: an edit
+    to the notebook or to drfkit (a new ``code_hash``) runs it again. Removing the code check from
+    ``_resumable`` fails this."""
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    ran, stop = [], {"now": True}
+
+    class FakePapermill:
+        @staticmethod
+        def execute_notebook(src, out, **kw):
+            ran.append(Path(src).stem)
+            if Path(src).stem == "01_pendulum_training" and stop["now"]:
+                raise KeyboardInterrupt
+            Path(out).write_text("{}")
+
+    monkeypatch.setitem(sys.modules, "papermill", FakePapermill)
+    only = ["00_data_prep", "01_pendulum_training"]
+    assert pipeline.run("quick", only) == 130
+    stop["now"], ran[:] = False, []
+    real = pipeline.code_hash
+    monkeypatch.setattr(pipeline, "code_hash", lambda name: real(name) + "-edited")
+    assert pipeline.run("quick", only) == 0
+    assert ran == only  # 00 finished before, but with other code: run again

@@ -494,3 +494,23 @@ def test_torch_threads_restores_the_count_even_after_an_error():
             assert torch.get_num_threads() == other
             raise RuntimeError("inside")
     assert torch.get_num_threads() == before
+
+
+@pytest.mark.parametrize("study", ["pendulum", "pedestrians"])
+@pytest.mark.parametrize("kind", ["drf", "lstm"])
+def test_streaming_with_a_non_identity_transition(study, kind):
+    """A fresh DRF's transition gives F = I, under which a streaming step using F^T (or no F at all)
+    still matches; with the transition head (the LSTM's weights) perturbed it must match too. A
+    stream_step that applies F transposed fails this."""
+    torch.manual_seed(0)
+    model = build_timing_model(kind, study)
+    seq = example_frames(study, batch=3, n_frames=6, seed=2)
+    with torch.no_grad():
+        before = model.features(seq)[0]
+        g = torch.Generator().manual_seed(1)
+        for name, p in model.named_parameters():
+            if "transition" in name or kind == "lstm":
+                p.add_(0.3 * torch.randn(p.shape, generator=g))
+        whole = model.features(seq)[0]
+        assert not torch.allclose(whole, before, atol=1e-3)  # the perturbation reaches the features
+        torch.testing.assert_close(stream(model, seq), whole, rtol=1e-4, atol=1e-5)
