@@ -162,6 +162,32 @@ def summarise_ablation(table: pd.DataFrame) -> pd.DataFrame:
             .sort_values("mae_blackout").round(4).reset_index())
 
 
+def round2_reading(summary: pd.DataFrame) -> str:
+    """What the second round's summary (``summarise_ablation``) says, in sentences written from
+    its numbers: per model kind the variant with the lowest validation MAE at the training noise,
+    at 0.75 and in the blackout, then the DRF's best against the LSTM's and no_dynamics'."""
+    if summary.empty:
+        return "No finished row yet."
+    lines = []
+    best: dict[str, dict[str, Any]] = {}
+    for kind, rows in summary.groupby("kind", sort=True):
+        parts = []
+        for col, label in (("mae_0.5", "at 0.5"), ("mae_0.75", "at 0.75"), ("mae_blackout", "in the blackout")):
+            if col in rows and rows[col].notna().any():
+                r = rows.loc[rows[col].idxmin()]
+                parts.append(f"{label} {r['variant']} ({r[col]:.4f}, {int(r['n_seeds'])} seed(s))")
+                best.setdefault(kind, {})[col] = float(r[col])
+        lines.append(f"{kind}: lowest validation MAE " + "; ".join(parts) + ".")
+    if "drf" in best:
+        for other in ("lstm", "no_dynamics"):
+            if other in best:
+                ratios = [f"{label} {best['drf'][col] / best[other][col]:.2f}x" for col, label in
+                          (("mae_0.5", "at 0.5"), ("mae_0.75", "at 0.75"), ("mae_blackout", "blackout"))
+                          if col in best["drf"] and col in best[other]]
+                lines.append(f"best DRF / best {other}: " + ", ".join(ratios) + ".")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Train and judge protocol variants on validation data.")
     parser.add_argument("--budget", default="small", choices=sorted(BUDGETS))

@@ -121,6 +121,12 @@ SCHEMA = Section("", {
             "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
             "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
             "seeds": Spec(list[int], _SEEDS, _seeds),
+            "round2": Section("round2_", {
+                "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS,
+                               "budget of the second round: how the models are fit (drfkit.protocols.ROUND2_VARIANTS)"),
+                "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
+                "seeds": Spec(list[int], _SEEDS, _seeds),
+            }),
         }),
         "regime": Section("regime_", {
             "train_noise": Spec(list[float], "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
@@ -205,7 +211,8 @@ _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
                "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
-_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "regime_train_noise",
+_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "ablation_round2_budget",
+             "ablation_round2_variants", "ablation_round2_seeds", "regime_train_noise",
              "regime_seeds", "regime_test_sequences"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",

@@ -60,6 +60,11 @@ ROUND2_VARIANTS = {
     "fit_lstm_noise1": {"kind": "lstm", "train": FIT_THE_MEAN, "train_max_noise": 1.0},
     "fit_no_dynamics": {"kind": "no_dynamics", "train": FIT_THE_MEAN},
     "fit_no_dynamics_blackout": {"kind": "no_dynamics", "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
+    # a filter lever: the mean decoded from z alone, sigma from P alone (as the RKN's decoder)
+    "fit_split_paper_blackout": {"kind": "drf", "model": {"decoder_split": True}, "train": FIT_THE_MEAN,
+                                 "blackouts": BLACKOUT_TRAINING},
+    "fit_split_book": {"kind": "drf", "model": BOOK_DRF | {"decoder_split": True}, "train": FIT_THE_MEAN,
+                       "blackouts": BLACKOUT_TRAINING},
 }
 VARIANTS.update(ROUND2_VARIANTS)
 

@@ -305,19 +305,26 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
     """The README's short claims table from ``claims.csv``: one row per claim (id, claim, the paper's
     number) and a verdict per protocol when there is more than one ("—" where a claim is judged
     under one protocol only); report.md and claims.md hold ours and the rules."""
-    from drfkit.claims import read_claims
+    from drfkit.claims import CLAIM_EVIDENCE, PEDESTRIAN_CLAIMS, evidence_links, read_claims
+    from drfkit.paths import REPO_ROOT
 
     c = read_claims(claims_csv)
+    try:
+        prefix = Path(claims_csv).resolve().parent.relative_to(REPO_ROOT).as_posix() + "/"
+    except ValueError:  # a profile outside the repository: links relative to its results folder
+        prefix = ""
     protocols = list(dict.fromkeys(c["protocol"]))
     verdict_cols = [f"verdict, {p} protocol" for p in protocols] if len(protocols) > 1 else ["verdict"]
-    head = ["id", "claim", "paper"] + verdict_cols
+    head = ["id", "claim", "paper"] + verdict_cols + ["judged in"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for cid, rows in c.groupby("id", sort=False):
         by_protocol = dict(zip(rows["protocol"], rows["verdict"]))
         first = rows.iloc[0]
-        verdicts = [f"**{by_protocol[p]}**" if p in by_protocol else "—" for p in protocols]
+        sim = " (simulated source)" if cid in PEDESTRIAN_CLAIMS else ""
+        verdicts = [f"**{by_protocol[p]}**{sim}" if p in by_protocol else "—" for p in protocols]
         cells = [cid, first["claim"], first["paper"]] + verdicts
-        lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " |")
+        lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " | "
+                     + (evidence_links(cid, prefix) if cid in CLAIM_EVIDENCE else "") + " |")
     if len(protocols) > 1:
         lines += ["", "— : the claim is judged under the paper's protocol only (the book's protocol changes "
                       "only the pendulum models)."]

@@ -464,3 +464,32 @@ def test_image_encoder_chunks_compute_the_same_function():
     grads_whole = torch.autograd.grad(whole.square().sum(), list(enc.parameters()))
     for g, gw in zip(grads, grads_whole):
         torch.testing.assert_close(g, gw, rtol=1e-4, atol=1e-5)
+
+
+def test_a_split_decoder_reads_the_mean_from_z_and_sigma_from_the_variance_alone():
+    """decoder_split: changing the belief's log variance moves sigma, never the mean; changing its
+    mean moves the mean, never sigma (for one pass and for MC-dropout samples)."""
+    from drfkit.models.parts import Decoder
+
+    torch.manual_seed(0)
+    dec = Decoder(8, 2, hidden=16, dropout_p=0.2, split=4).eval()
+    x = torch.randn(3, 5, 8)
+    other_var = x.clone()
+    other_var[..., 4:] += 1.0
+    other_mean = x.clone()
+    other_mean[..., :4] += 1.0
+    with torch.no_grad():
+        m0, s0 = dec(x)
+        m1, s1 = dec(other_var)
+        m2, s2 = dec(other_mean)
+        assert torch.equal(m0, m1) and not torch.allclose(s0, s1)
+        assert torch.equal(s0, s2) and not torch.allclose(m0, m2)
+        torch.manual_seed(1)
+        ms, ss = dec(x, n_samples=4)
+        torch.manual_seed(1)
+        ms1, ss1 = dec(other_var, n_samples=4)
+        assert ms.shape == (4, 3, 5, 2) and torch.equal(ms, ms1)
+    with pytest.raises(ValueError, match="split"):
+        Decoder(8, 2, split=8)
+    with pytest.raises(ValueError, match="cannot be split"):
+        build_model(default_config("lstm", "pendulum", 2, decoder_split=True))

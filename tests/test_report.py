@@ -154,13 +154,31 @@ def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tm
     pd.DataFrame([{"id": i, "protocol": p, "claim": f"claim {i}", "paper": "1 | 2", "ours": "x", "verdict": v,
                    "rule": "r"} for i, p, v in rows]).to_csv(tmp_path / "claims.csv", index=False)
     lines = claims_summary_table(tmp_path / "claims.csv")
-    assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol |"
-    assert lines[2] == "| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** |"
-    assert lines[3] == "| C4 | claim C4 | 1 / 2 | **reproduced** | — |"
+    assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol | judged in |"
+    assert lines[2].startswith("| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** | [03_ood_noise_evaluation")
+    assert lines[3].startswith("| C4 | claim C4 | 1 / 2 | **reproduced** (simulated source) | — | ")
+    assert "(tables/ood_all_metrics.csv)" in lines[3]  # every claim links its notebook, tables and figures
     pd.DataFrame([{"id": "C4", "protocol": "paper", "claim": "c", "paper": "p", "ours": "x", "verdict": "partly",
                    "rule": "r"}]).to_csv(tmp_path / "claims.csv", index=False)
-    assert claims_summary_table(tmp_path / "claims.csv") == ["| id | claim | paper | verdict |", "|---|---|---|---|",
-                                                             "| C4 | c | p | **partly** |"]
+    table = claims_summary_table(tmp_path / "claims.csv")
+    assert table[:2] == ["| id | claim | paper | verdict | judged in |", "|---|---|---|---|---|"]
+    assert table[2].startswith("| C4 | c | p | **partly** (simulated source) | [03_ood_noise_evaluation")
+
+
+def test_every_claim_links_evidence_that_the_paper_profile_has():
+    """The claim map names files the committed paper profile holds (a renamed table or figure fails)."""
+    from drfkit.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
+    from drfkit.paths import REPO_ROOT
+
+    assert set(CLAIM_EVIDENCE) == set(CLAIM_SOURCES)
+    root = REPO_ROOT / "results" / "paper"
+    for cid, (notebook, section, tables, figures) in CLAIM_EVIDENCE.items():
+        assert (root / "executed" / f"{notebook}.ipynb").exists(), cid
+        assert f"## {section}" in (REPO_ROOT / "notebooks" / "src" / f"{notebook}.py").read_text(), (cid, section)
+        for name in tables:
+            assert (root / "tables" / name).exists(), (cid, name)
+        for name in figures:
+            assert (root / "figures" / name).exists(), (cid, name)
 
 
 def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():

@@ -205,24 +205,39 @@ class Decoder(nn.Module):
     """
 
     def __init__(self, in_dim: int, out_dim: int, hidden: int = 64, dropout_p: float = 0.1,
-                 target_offset: float = 0.0, target_scale: float = 1.0):
+                 target_offset: float = 0.0, target_scale: float = 1.0, split: int | None = None):
         super().__init__()
         check_dropout_p(dropout_p)
         if not target_scale > 0:
             raise ValueError(f"target_scale must be > 0, got {target_scale!r}")
-        self.linear3 = nn.Linear(in_dim, hidden)
+        if split is not None and not 0 < split < in_dim:
+            raise ValueError(f"split must lie in (0, {in_dim}) (the inputs that feed the mean), got {split!r}")
+        # split: the mean reads x[..., :split] alone (a belief's mean), sigma x[..., split:] alone (its
+        # log variance), each through its own hidden layer; so sigma can only come from the variance
+        self.split, self.hidden_dim = split, hidden
+        self.linear3 = nn.Linear(in_dim if split is None else split, hidden)
+        if split is not None:
+            self.linear3_sigma = nn.Linear(in_dim - split, hidden)
         self.linear4 = nn.Linear(hidden, out_dim)
         self.linear5 = nn.Linear(hidden, out_dim)
         self.dropout_p = float(dropout_p)
         self.target_offset, self.target_scale = float(target_offset), float(target_scale)
 
     def hidden(self, x: torch.Tensor) -> torch.Tensor:
-        """The deterministic part: ReLU(Linear3(x)) (..., hidden)."""
-        return F.relu(self.linear3(x))
+        """The deterministic part: ReLU(Linear3(x)) (..., hidden); split: the mean's and sigma's
+        hidden layers side by side (..., 2 hidden)."""
+        if self.split is None:
+            return F.relu(self.linear3(x))
+        return torch.cat([F.relu(self.linear3(x[..., :self.split])),
+                          F.relu(self.linear3_sigma(x[..., self.split:]))], dim=-1)
 
     def readout(self, h: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(Dropped-out) hidden (..., hidden) -> mean, sigma (..., out_dim)."""
-        mean, sigma = self.linear4(h), positive_elu(self.linear5(h), SIGMA_FLOOR)
+        if self.split is None:
+            mean, sigma = self.linear4(h), positive_elu(self.linear5(h), SIGMA_FLOOR)
+        else:
+            k = self.hidden_dim
+            mean, sigma = self.linear4(h[..., :k]), positive_elu(self.linear5(h[..., k:]), SIGMA_FLOOR)
         if self.target_scale == 1.0 and self.target_offset == 0.0:
             return mean, sigma
         return self.target_offset + self.target_scale * mean, self.target_scale * sigma

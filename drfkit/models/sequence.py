@@ -222,10 +222,14 @@ class SequenceModel(nn.Module):
 class _EncodedSequenceModel(SequenceModel):
     """Encoder + observation heads + decoder; subclasses add the dynamics."""
 
+    #: the features are a belief [mean, log variance] (n each), so the decoder may be split
+    belief_features: bool = True
+
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  feature_dim: int = 64, decoder_hidden: int = 64, dropout_p: float = 0.1,
                  image_downsample: str = "pool", target_offset: float = 0.0, target_scale: float = 1.0,
-                 noise_head: str = "elu", _extra_config: dict[str, Any] | None = None):
+                 noise_head: str = "elu", decoder_split: bool = False,
+                 _extra_config: dict[str, Any] | None = None):
         if input_kind not in INPUT_KINDS:
             raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
         for name, value in (("out_dim", out_dim), ("latent", latent), ("feature_dim", feature_dim),
@@ -239,7 +243,13 @@ class _EncodedSequenceModel(SequenceModel):
             raise ValueError(f"noise_head must be one of {NOISE_HEADS}, got {noise_head!r}")
         # options of the book's protocol enter the config only when they differ from the
         # paper's, so configs (and the checkpoint names hashed from them) made before stay as they were
-        extra = dict(_extra_config or {}) | ({"noise_head": noise_head} if noise_head != "elu" else {})
+        if not isinstance(decoder_split, bool):
+            raise ValueError(f"decoder_split must be True or False, got {decoder_split!r}")
+        if decoder_split and not self.belief_features:
+            raise ValueError(f"{type(self).__name__} decodes no [mean, log variance] belief, so its decoder "
+                             "cannot be split (decoder_split is for the DRF and no_dynamics)")
+        extra = dict(_extra_config or {}) | ({"noise_head": noise_head} if noise_head != "elu" else {}) \
+            | ({"decoder_split": True} if decoder_split else {})
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, latent=latent,
                               feature_dim=feature_dim, decoder_hidden=decoder_hidden,
                               dropout_p=dropout_p, image_downsample=image_downsample,
@@ -248,7 +258,8 @@ class _EncodedSequenceModel(SequenceModel):
         self.latent = latent
         self.encoder = make_encoder(input_kind, feature_dim, image_downsample)
         self.heads = ObservationHeads(feature_dim, latent, noise_head)
-        self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale)
+        self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale,
+                               split=latent if decoder_split else None)
 
     def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Encode all B*T frames in one call: w, r (B, T, n)."""
@@ -272,6 +283,8 @@ class LSTMBaseline(_EncodedSequenceModel):
     Hidden size 2n (so the decoder input size matches the other models); two layers by
     default, the depth of the DRF's transition network.
     """
+
+    belief_features = False  # its features are the LSTM's hidden state, not a [mean, log variance]
 
     kind = "lstm"
 

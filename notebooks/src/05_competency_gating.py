@@ -201,8 +201,9 @@ plt.show()
 for study, protocol in GROUPS:
     row = claims.c7_gating(summary[summary["protocol"] == protocol], study)
     claims_table = claims.upsert(P.profile, [row], protocol=protocol)
-    assert row["verdict"] in {claims.REPRODUCED, claims.PARTLY, claims.NOT, claims.NOT_TESTABLE}
-    print(f"claim written: {row['id']} ({protocol} protocol): {row['verdict']}")
+    # C7a's verdict rests on measured times, which differ between machines: nbval must not compare it
+    # (it is in the table below); C7b's rests on PICP alone
+    print(f"claim written: {row['id']} ({protocol} protocol)" + (f": {row['verdict']}" if study == "pedestrians" else ""))
 
 # %%
 # NBVAL_IGNORE_OUTPUT
