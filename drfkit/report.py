@@ -233,7 +233,8 @@ def recursion_scaling_line(scaling: pd.DataFrame) -> str:
         parts.append(f"at {int(threads)} thread(s) the recursion takes {1e3 * rec['median_s']:.0f} ms at batch "
                      f"{int(step['batch'])}, {1e3 * step['fixed_s']:.0f} ms of it per-call cost (the intercept of its "
                      f"time against the batch), and without that cost the DRF step would cost "
-                     f"**{step['floor_ratio']:.2f}×** a no_dynamics step instead of {step['ratio']:.2f}×")
+                     f"**{step['floor_ratio']:.2f}×** a no_dynamics step instead of {step['ratio']:.2f}× (the step ratio timed in "
+                     f"this same run; the training-speed line times steps in a separate run)")
     return ("Per-call cost or arithmetic, in notebook 01 (the recursion alone at half, one and two times the batch, "
             "in one run with both training steps): " + "; ".join(parts)
             + " (`tables/pendulum_recursion_scaling.csv`, `figures/pendulum_recursion_scaling.png`).")
