@@ -15,6 +15,7 @@ its renderer); they say how far a learned model is from the limit, not what it s
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -141,6 +142,30 @@ def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.n
         if name == "blackout":
             curve_rows += [{"model": "physics_bound", "frame": f, "mae": float(e)} for f, e in enumerate(per_frame)]
     return pd.DataFrame(rows), pd.DataFrame(curve_rows, columns=["model", "frame", "mae"])
+
+
+def encoder_accuracy_check(targets: np.ndarray, encoder_mae: dict[str, float], n_particles: int = 500,
+                           seed: int = 0) -> pd.DataFrame:
+    """Can any filter reach a claimed MAE from an encoder of a given accuracy? The most favourable
+    case: per-frame estimates = truth + independent Gaussian errors of a constant, known size, scaled
+    so that their MAE is ``encoder_mae[name]`` (E|e| = s sqrt(2/pi) per component), filtered by the
+    true-physics particle filter (the exact dynamics, the exact error model). Real encoders do worse
+    (errors grow on noisy frames, pure-noise frames carry nothing), so the filtered MAE here is a
+    lower bound for a filter on such an encoder.
+
+    targets: (N, T, 2) true (cos, sin). Returns one row per name: name, encoder_mae (wanted),
+    encoder_mae_drawn (measured on the draw), sigma, filtered_mae, n_particles."""
+    targets = np.asarray(targets, dtype=np.float64)
+    rows = []
+    for i, (name, mae) in enumerate(encoder_mae.items()):
+        sigma = float(mae) * math.sqrt(math.pi / 2.0)
+        rng = np.random.default_rng([seed, i])
+        est = targets + rng.normal(0.0, sigma, size=targets.shape)
+        filtered = oracle.pendulum_particle_filter(est, np.full_like(est, sigma), n_particles=n_particles, seed=seed)
+        rows.append({"name": name, "encoder_mae": float(mae), "encoder_mae_drawn": float(np.abs(est - targets).mean()),
+                     "sigma": sigma, "filtered_mae": float(np.abs(filtered - targets).mean()),
+                     "n_particles": n_particles})
+    return pd.DataFrame(rows)
 
 
 def pixel_reference(P, levels, n_angles: int = 4096) -> pd.DataFrame:

@@ -297,3 +297,18 @@ def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
     as_model = blackout_table(curves.assign(seed=0))
     assert bound["mae"] == pytest.approx(float(as_model["mae_blackout"].iloc[0]), rel=1e-12)
     assert bound["mae"] != pytest.approx(bound["mae_all_frames"], rel=1e-3)  # the frames do matter here
+
+
+def test_encoder_accuracy_check_draws_the_asked_accuracy_and_filters_it():
+    """The drawn per-frame errors have the asked MAE (E|e| = s sqrt(2/pi)); the true-physics filter
+    on them does better than the encoder; a more accurate encoder gives a better filter."""
+    from drfkit.dynamics import encoder_accuracy_check
+
+    rng = np.random.default_rng(0)
+    theta, _ = pend._simulate(rng.uniform(-np.pi, np.pi, 8), 30, rng)
+    targets = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+    table = encoder_accuracy_check(targets, {"coarse": 0.1, "fine": 0.02}, n_particles=200, seed=0).set_index("name")
+    assert table.loc["coarse", "encoder_mae_drawn"] == pytest.approx(0.1, rel=0.05)
+    assert table.loc["fine", "sigma"] == pytest.approx(0.02 * math.sqrt(math.pi / 2))
+    assert (table["filtered_mae"] < table["encoder_mae_drawn"]).all()
+    assert table.loc["fine", "filtered_mae"] < table.loc["coarse", "filtered_mae"]

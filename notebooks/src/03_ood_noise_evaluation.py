@@ -81,6 +81,12 @@ paper_levels = (summary["study"].eq("pendulum") & summary["noise"].isin(P.pend_e
 cols = ["study", "protocol", "model", "noise", "n_seeds", "mae", "mae_ci", "picp", "mpiw", "nll", "crps", "cal_error"]
 summary.loc[paper_levels, cols].round(4)
 
+# %%
+# The headline numbers, rounded (nbval compares this cell on the quick profile)
+for _, r in summary.loc[paper_levels].iterrows():
+    print(f"{r['study']:<11s} {r['protocol']:<5s} {r['model']:<12s} noise {r['noise']:g}: MAE {r['mae']:.3g}, "
+          f"PICP {100 * r['picp']:.0f}%")
+
 # %% [markdown]
 # ## The paper's figures, redrawn
 # Pendulum MAE (paper Fig. 3 middle) and pedestrian MAE with Monoloco (paper Fig. 4); black ticks
