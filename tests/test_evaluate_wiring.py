@@ -48,3 +48,50 @@ def test_metrics_of_a_stub_prediction_use_the_total_sigma_and_the_mask(monkeypat
     crps = np.mean([s * ((e / s) * (2 * _cdf(e / s) - 1) + 2 * _phi(e / s) - 1 / math.sqrt(math.pi)) for e in err])
     assert m["crps"] == pytest.approx(crps)
     assert m["aleatoric"] == pytest.approx(0.3) and m["epistemic"] == pytest.approx(0.4)
+
+
+def _stub_study(monkeypatch, tmp_path):
+    """evaluate_study / calibration_points on one stub model and a padded data set, with the
+    prediction fixed (mean, aleatoric 0.3, epistemic 0.4: total 0.5)."""
+    import types
+
+    import drfkit.evaluate as ev
+    from drfkit import studies
+
+    mean = torch.tensor([[[0.0], [1.0], [2.0]], [[0.5], [0.0], [9.0]]])
+    targets = torch.tensor([[[0.1], [1.5], [2.0]], [[0.0], [-1.2], [100.0]]])
+    mask = torch.tensor([[True, True, True], [True, True, False]])
+    pred = unc.Prediction(mean=mean, aleatoric=torch.full_like(mean, 0.3), epistemic=torch.full_like(mean, 0.4),
+                          total=torch.full_like(mean, 0.5), n_samples=8, dropout_p=0.1)
+    monkeypatch.setattr(ev, "cached_predict_rates", lambda *a, **k: [pred] * len(k["dropout_rates"]))
+    monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise: SequenceData(
+        torch.zeros(2, 3, 17, 3), targets, mask))
+    monkeypatch.setattr(studies, "pick_device", lambda device: torch.device("cpu"))
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    P = types.SimpleNamespace(n_samples=8, interval_level=0.95, profile="stub", device="cpu")
+    model = types.SimpleNamespace(default_dropout_p=0.1)
+    return P, {("drf", 0): model}
+
+
+def test_evaluate_study_rows_carry_the_total_sigma_metrics(monkeypatch, tmp_path):
+    from drfkit.evaluate import evaluate_study
+
+    P, models = _stub_study(monkeypatch, tmp_path)
+    rows = evaluate_study(P, "pedestrians", [0.01, 0.05], models=models)
+    assert len(rows) == 2 and set(rows["noise"]) == {0.01, 0.05} and (rows["dropout_p"] == 0.1).all()
+    err = np.array([0.1, 0.5, 0.0, 0.5, 1.2])
+    assert rows["mae"].tolist() == pytest.approx([err.mean()] * 2)
+    assert rows["picp"].tolist() == pytest.approx([0.8] * 2)
+    assert rows["mpiw"].tolist() == pytest.approx([2 * Z975 * 0.5] * 2)
+
+
+def test_calibration_points_count_standardised_residuals_of_the_total_sigma(monkeypatch, tmp_path):
+    """Residuals / total sigma on the real frames: 0.2, 1.0, 0.0, -1.0, -2.4; at the 50 % level the
+    observed fraction at or below the median is 3/5, at 95 % (z 1.645) all five."""
+    from drfkit.evaluate import calibration_points
+
+    P, models = _stub_study(monkeypatch, tmp_path)
+    cal = calibration_points(P, "pedestrians", [0.05], models=models).set_index("expected")["observed"]
+    assert cal.loc[0.5] == pytest.approx(3 / 5)
+    assert cal.loc[0.95] == pytest.approx(1.0)
+    assert cal.loc[0.05] == pytest.approx(1 / 5)  # only -2.4 is below z(0.05) = -1.645
