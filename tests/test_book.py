@@ -140,5 +140,5 @@ def test_link_checker_on_a_small_tree(tmp_path):
         "index.html: missing.html (no such file)",
         "index.html: gone.png (no such file)",
         "index.html: ../outside.html (outside the book)"])
-    (tmp_path / "index.html").write_text('<a href="sub/page.html#here">ok</a>')
+    (tmp_path / "index.html").write_text('<a href="sub/page.html#here" id="top">ok</a>')
     assert booklib.check_links(tmp_path) == []

@@ -14,12 +14,7 @@ from drfkit.studies import model_config
 from drfkit.train import SequenceData, TrainConfig, fingerprint, random_windows, train_model
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 def values(seed=0, shape=(3, 4, 2)):
