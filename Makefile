@@ -10,9 +10,11 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.drfkit-installed
+# the book's tools (Sphinx, MyST-NB, playwright), installed on the first `make book` only
+BOOK_STAMP := $(VENV)/.book-installed
 NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbval-cell-timeout 1200
 
-.PHONY: reproduce quick test unit nbval bench notebooks clean help
+.PHONY: reproduce quick test unit nbval bench notebooks book book-check clean help
 
 help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
@@ -22,6 +24,8 @@ help:
 	@echo "make test                             unit tests + strict nbval on notebooks/"
 	@echo "make bench                            the timing benchmark alone, prints the table"
 	@echo "make notebooks                        rebuild notebooks/*.ipynb from notebooks/src/ and store outputs"
+	@echo "make book [PROFILE=paper|quick]       the executed notebooks as an HTML book in results/\$$PROFILE/book/"
+	@echo "make book-check                       open that book in headless chromium and check it (apt-get install chromium)"
 	@echo "make clean                            remove what runs produce (keeps results/paper/)"
 
 $(STAMP): environment.txt pyproject.toml
@@ -51,8 +55,20 @@ bench: $(STAMP)
 notebooks: $(STAMP)
 	$(PY) tools/build_notebooks.py --execute
 
+# -c environment.txt: the book's packages never change the pins make test and make reproduce use
+$(BOOK_STAMP): requirements-book.txt $(STAMP)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements-book.txt -c environment.txt
+	@touch $@
+
+# nothing is executed: results/$(PROFILE)/ as a run left it, rendered by Sphinx (tools/build_book.py)
+book: $(BOOK_STAMP)
+	$(PY) tools/build_book.py --profile $(PROFILE)
+
+book-check: $(BOOK_STAMP)
+	$(PY) tools/check_book.py --profile $(PROFILE)
+
 clean:
 	find results -mindepth 1 -maxdepth 1 ! -name paper -exec rm -rf {} +
 	rm -rf .pytest_cache
 	find . -name __pycache__ -type d -not -path './$(VENV)/*' -prune -exec rm -rf {} +
-	rm -rf results/paper/data results/paper/predictions results/paper/measurements
+	rm -rf results/paper/data results/paper/predictions results/paper/measurements results/paper/book

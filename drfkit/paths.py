@@ -43,3 +43,10 @@ def tables_dir(profile: str) -> Path:
 
 def figures_dir(profile: str) -> Path:
     return results_dir(profile, "figures")
+
+
+# One pipeline per profile: an OS lock on results/<profile>/.pipeline.lock (drfkit.io.exclusive_lock),
+# taken by drfkit.pipeline and by a notebook started on its own (drfkit.runtime.hold_profile); this
+# variable, inherited by the pipeline's kernels, names the results folder their parent has locked.
+PIPELINE_LOCK = ".pipeline.lock"
+PIPELINE_ENV = "DRFKIT_PIPELINE_HOLDS"

@@ -29,7 +29,7 @@ from pathlib import Path
 from drfkit.io import atomic_write_bytes, exclusive_lock, param_hash
 from drfkit.manifest import now_iso, read_manifest, record_cell_times, record_notebook, update_manifest
 from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
-from drfkit.paths import NOTEBOOKS_DIR, REPO_ROOT, results_dir
+from drfkit.paths import NOTEBOOKS_DIR, PIPELINE_ENV, PIPELINE_LOCK, REPO_ROOT, results_dir
 from drfkit.progress import Echo
 
 # What a notebook run may leave half-rewritten: everything under results/<profile>/ except the
@@ -149,11 +149,6 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
             os.environ.pop(PIPELINE_ENV, None)
 
 
-# One pipeline per profile: an OS lock on results/<profile>/.pipeline.lock (drfkit.io.exclusive_lock);
-# a notebook started on its own takes it too (drfkit.runtime), unless its pipeline holds it (this
-# variable, inherited by the kernels, names the results folder the parent pipeline has locked).
-PIPELINE_LOCK = ".pipeline.lock"
-PIPELINE_ENV = "DRFKIT_PIPELINE_HOLDS"
 SNAPSHOT_DIR = ".snapshot"  # the outputs before the running notebook, on disk until it ends
 
 

@@ -62,8 +62,7 @@ def hold_profile(profile: str) -> None:
     pipeline lock for the life of its kernel, so a pipeline or another notebook on the same profile
     is refused (``LockedError`` with the holder's PID and host) before anything is written. Under
     ``drfkit.pipeline`` the parent already holds it (``DRFKIT_PIPELINE_HOLDS``)."""
-    from drfkit.paths import results_dir
-    from drfkit.pipeline import PIPELINE_ENV, PIPELINE_LOCK
+    from drfkit.paths import PIPELINE_ENV, PIPELINE_LOCK, results_dir
 
     root = results_dir(profile)
     if os.environ.get(PIPELINE_ENV) == str(root.resolve()) or str(root.resolve()) in _HELD:
