@@ -196,8 +196,10 @@ def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, 
 
 
 # ------------------------------------------------------------------------------ pedestrians
-# Frames whose detection the pedestrian blackout removes (keypoints zeroed, confidence 0, as a
-# missed PifPaf detection is given to the models), in windows whose every frame is real.
+# Frames whose detection the pedestrian blackout removes (keypoints zeroed, confidence 0), in windows
+# whose every frame is real. No training window holds such an all-zero frame (a missed detection is
+# left out of its track, not zeroed), so every model reads one as a person about 50 m away
+# (docs/simulator.md, section 4); the bound is told which frames are missing.
 PEDESTRIAN_BLACKOUT = (4, 7)
 CV_SIGMA_SCALES = (0.5, 1.0, 2.0)
 CV_ACCEL_STDS = (0.25, 0.5, 1.0, 2.0, 4.0)  # m/s^2 of depth change: walking turns plus the ego car's drift

@@ -148,9 +148,11 @@ for r in comparison.itertuples():
 # walkers' turns and the ego car's drift; `drfkit.oracle.constant_velocity_filter`). Fed each no_dynamics
 # seed's per-frame depths and σ (scale and acceleration noise chosen on the validation scenes at
 # p = 0.01), it shows what filtering the same per-frame estimates could give. The *blackout* removes
-# the detections of frames 4–6 of every full window (keypoints zeroed, confidence 0, as a missed
-# detection is given to the models): the bound predicts through them; a learned model can only coast
-# if its state carries the motion. MAE on the removed frames.
+# the detections of frames 4–6 of every full window (keypoints zeroed, confidence 0): the bound is told
+# they are missing and predicts through them; the learned models are fed the zeroed frames, which no
+# training window ever held (a missed detection is left out of its track), and every model reads one as
+# a person about 50 m away, so their error there measures that, not coasting (docs/simulator.md,
+# section 4). MAE on the removed frames.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
