@@ -194,7 +194,11 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
     ax.set_xticks(np.arange(len(trains)) + width * len(models) / 2, [f"{tn:g}" for tn in trains])
     ax.set(title="blackout (15 pure-noise frames)", xlabel="training max noise",
            ylabel="MAE on the blackout (cos θ, sin θ)")
-    _legend(ax, fontsize=6)
+    shown = dark[dark["model"].isin(models + ["physics_bound"])]
+    tallest = shown.groupby(["model", "train_noise"])["mae"].mean().max()
+    if np.isfinite(tallest) and tallest > 0:
+        ax.set_ylim(0, 1.45 * tallest)  # room for the legend above the bars
+    _legend(ax, fontsize=6, loc="upper center", ncol=2)
     fig.tight_layout()
     return fig
 
@@ -220,30 +224,33 @@ def plot_picp_mpiw(curves: pd.DataFrame, models: list[str], paper: dict | None =
             yerr = _clipped_err(picp, 100 * rows["picp_ci"].to_numpy(dtype=float), 0.0, 100.0)
             ax.errorbar(rows["mpiw"], picp, xerr=_clipped_err(rows["mpiw"], rows["mpiw_ci"]), yerr=yerr,
                         marker="o", ms=4, color=color(kind), label=label(kind))
-            for x, y, p in zip(rows["mpiw"], picp, rows["dropout_p"]):
-                if np.isfinite(x) and np.isfinite(y) and pd.notna(p):
-                    ax.annotate(f"{p:g}", (x, y), xytext=(3, -7), textcoords="offset points", fontsize=5,
-                                color=color(kind))
+            if kind == models[0]:  # the rates come in the same order along every model's curve
+                for x, y, p in zip(rows["mpiw"], picp, rows["dropout_p"]):
+                    if np.isfinite(x) and np.isfinite(y) and pd.notna(p):
+                        ax.annotate(f"{p:g}", (x, y), xytext=(4, -8), textcoords="offset points", fontsize=6,
+                                    color=color(kind))
             drawn += list(picp - yerr[0])
         pts = None
         if paper and per_level_paper:
             pts = next((v for k, v in paper.items() if abs(k - lv) < 1e-9), None)
         elif paper and lv == levels[-1]:
             pts = paper
-        for kind, xy in (pts or {}).items():
-            if kind in models:
-                ax.plot(*zip(*xy), "s--", ms=3, color=color(kind), alpha=0.35, label=f"paper {label(kind)}")
-                drawn += [y for _, y in xy]
-        ax.axhline(100 * nominal, color="gray", lw=0.8, ls=":", label=f"nominal coverage {100 * nominal:g} %")
+        shown = [kind for kind in (pts or {}) if kind in models]
+        for kind in shown:
+            ax.plot(*zip(*pts[kind]), "s--", ms=3, color=color(kind), alpha=0.35,
+                    label="the paper's curves (faded)" if kind == shown[0] else None)
+            drawn += [y for _, y in pts[kind]]
+        ax.axhline(100 * nominal, color="gray", lw=0.8, ls=":", label=f"nominal {100 * nominal:g} %")
         finite = [v for v in drawn if np.isfinite(v)]
         lowest = min([lowest] + finite)
         if finite and min(finite) >= 99.5:
-            ax.text(0.03, 0.04, "PICP ≥ 99.5 % at every dropout rate", transform=ax.transAxes, fontsize=6,
+            ax.text(0.03, 0.6, "PICP ≥ 99.5 % at every dropout rate", transform=ax.transAxes, fontsize=7,
                     color="dimgray")
-        _proxy(ax, f"number at a point: dropout rate; whiskers: {CI_TEXT}")
+        _proxy(ax, f"numbers at {label(models[0])}: dropout rate")
+        _proxy(ax, "whiskers: 95 % over seeds", marker="+", ms=7, color="black")
         ax.set_title(f"{_noise_name(level_name, study)} {lv:g}")
         ax.set_xlabel(_metric_label("mpiw", study)); ax.set_ylabel("PICP (%)")
-        _legend(ax, fontsize=6)
+        _legend(ax, fontsize=5.5, loc="lower right")
     for ax in axes[0]:  # one PICP range on every panel, never beyond what PICP can take
         ax.set_ylim(max(0.0, lowest - 2.0), 101.5)
     return fig
@@ -277,6 +284,7 @@ def plot_sweep(summary: pd.DataFrame, models: list[str], train_level: float, met
             ax.set_ylim(max(0.0, min(finite) - 3.0), 102.0)
         ax.set_xlabel(f"test {_noise_name(xlabel, study)}"); ax.set_ylabel(_metric_label(metric, study))
         _legend(ax, extra=[Patch(color="gray", alpha=0.3, label=f"band: {CI_TEXT}")])
+    fig.subplots_adjust(wspace=0.3)  # room for every panel's y-label
     return fig
 
 
@@ -296,6 +304,7 @@ def plot_calibration(points: pd.DataFrame, models: list[str], level_name: str | 
         ax.set_xlabel("expected quantile level"); ax.set_ylabel("observed fraction below the quantile")
         ax.set_xlim(0, 1); ax.set_ylim(0, 1)
         _legend(ax)
+    fig.subplots_adjust(wspace=0.35)  # room for every panel's y-label
     return fig
 
 
@@ -313,12 +322,13 @@ def plot_training_curves(curves: pd.DataFrame, models: list[str] | None = None, 
     to a margin above the marked ones) instead of the first epochs' losses.
     curves: ``drfkit.train.history_frame`` rows with model and seed columns."""
     models = models or list(dict.fromkeys(curves["model"]))
-    runs = [(kind, seed, run.sort_values("epoch")) for (kind, seed), run in curves.groupby(["model", "seed"], sort=False)
-            if kind in models]
+    runs = [(kind, seed, run.sort_values("epoch"))
+            for (kind, seed), run in curves.groupby(["model", "seed"], sort=False) if kind in models]
     on_l1 = {(kind, seed): _selection_metric(run) == "val_l1" for kind, seed, run in runs}
     if any(on_l1.values()):
+        l1_kinds = ", ".join(label(k) for k in dict.fromkeys(kind for (kind, _), on in on_l1.items() if on))
         panels = [("val_loss", False, "validation NLL (nats)", "validation Gaussian NLL: selects the checkpoint"),
-                  ("val_l1", True, "validation L1 of μ (m)", "validation L1: selects Monoloco's checkpoint")]
+                  ("val_l1", True, "validation L1 of μ (m)", f"validation L1: selects {l1_kinds}'s checkpoint")]
     else:
         panels = [("train_loss", None, "training loss (NLL, nats)", "training NLL"),
                   ("val_loss", None, "validation NLL (nats)", "validation NLL: selects the checkpoint")]
@@ -335,19 +345,19 @@ def plot_training_curves(curves: pd.DataFrame, models: list[str] | None = None, 
                     label=label(kind) if seed == first_seed[kind] else None)
             ax.plot([run["epoch"].iloc[best]], [y[best]], ls="none", marker="*", ms=9, color=color(kind),
                     mec="black", mew=0.5, zorder=4,
-                    label=None if starred else ("best validation epoch (kept checkpoint)" if column != "train_loss"
-                                                else "epoch of the kept checkpoint"))
+                    label=None if starred else ("best epoch (kept)" if column != "train_loss"
+                                                else "kept epoch (best on validation)"))
             starred = True
             values += list(y[np.isfinite(y)]); marked.append(y[best])
         if focus and values:
             low, top = min(values), max(marked)
             pad = max(top - low, 0.05 * max(abs(low), abs(top)), 1e-3)
-            ax.set_ylim(low - 0.5 * pad, top + 3 * pad)
+            ax.set_ylim(low - pad, top + 3 * pad)
             if max(values) > top + 3 * pad:
-                ax.text(0.98, 0.97, "y-range: the selection region; curves run above it", transform=ax.transAxes,
-                        ha="right", va="top", fontsize=6, color="dimgray")
+                _proxy(ax, "y cut to the selection region")
         ax.set_title(title, fontsize=9); ax.set_xlabel("epoch"); ax.set_ylabel(ylabel)
-        _legend(ax, fontsize=7)
+        _legend(ax, fontsize=6.5)
+    fig.tight_layout()
     return fig
 
 

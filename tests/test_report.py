@@ -79,7 +79,8 @@ def test_results_section_reports_the_recursion_scaling_per_thread_count(tmp_path
     text = results_section("p", "make reproduce", False)
     assert ("at 1 thread(s) the recursion takes 108 ms at batch 50, 28 ms of it per-call cost (the intercept of "
             "its time against the batch), and without that cost the DRF step would cost **1.51×** a no_dynamics "
-            "step instead of 1.75×; at 2 thread(s)") in text
+            "step instead of 1.75× (the step ratio timed in this same run; the training-speed line times steps in "
+            "a separate run); at 2 thread(s)") in text
     assert "**1.53×**" in text and "`tables/pendulum_recursion_scaling.csv`" in text
 
 

@@ -40,7 +40,7 @@ from drfkit import studies
 from drfkit.evaluate import evaluate_study, summarise
 from drfkit.paper import PENDULUM_MAE, PENDULUM_PICP_MPIW
 from drfkit.report import (color, label, new_figure, paper_comparison, plot_mae_bars, plot_picp_mpiw,
-                           epoch_times_line, recursion_scaling_line, save_figure, save_table)
+                           plot_training_curves, epoch_times_line, recursion_scaling_line, save_figure, save_table)
 
 # %% [markdown]
 # ## Training
@@ -62,15 +62,8 @@ print(f"{len(results)} runs trained for {epochs.min()} to {epochs.max()} of {P.p
       f"checkpoints in results/{P.profile}/models/")
 
 # %%
-fig, axes = new_figure(2)
-for (kind, seed), run in curves.groupby(["model", "seed"]):
-    axes[0, 0].plot(run["epoch"], run["train_loss"], color=color(kind), alpha=0.7,
-                    label=label(kind) if seed == P.seeds[0] else None)
-    axes[0, 1].plot(run["epoch"], run["val_loss"], color=color(kind), alpha=0.7)
-axes[0, 0].set_title("training NLL"); axes[0, 1].set_title("validation NLL")
-for ax in axes[0]:
-    ax.set_xlabel("epoch")
-axes[0, 0].legend()
+# each run's kept epoch is starred; the y-range shows the selection region, not the first epochs
+fig = plot_training_curves(curves, P.pend_models)
 save_figure(P.profile, "pendulum_training_curves", fig)
 plt.show()
 

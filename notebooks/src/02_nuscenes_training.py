@@ -43,7 +43,7 @@ import pandas as pd
 from drfkit import studies
 from drfkit.evaluate import evaluate_study, summarise
 from drfkit.paper import PEDESTRIAN_MAE
-from drfkit.report import color, label, new_figure, paper_comparison, plot_mae_bars, save_figure, save_table
+from drfkit.report import label, paper_comparison, plot_mae_bars, plot_training_curves, save_figure, save_table
 
 # %% [markdown]
 # ## How realistic is the simulated source?
@@ -99,14 +99,8 @@ assert np.isfinite(curves[["train_loss", "val_loss"]].to_numpy()).all()
 print(f"{len(results)} runs; checkpoints in results/{P.profile}/models/")
 
 # %%
-fig, axes = new_figure(2)
-for (kind, seed), run in curves.groupby(["model", "seed"]):
-    ax = axes[0, 1] if kind == "monoloco" else axes[0, 0]
-    ax.plot(run["epoch"], run["val_l1" if kind == "monoloco" else "val_loss"], color=color(kind), alpha=0.7,
-            label=label(kind) if seed == P.seeds[0] else None)
-axes[0, 0].set_title("validation Gaussian NLL"); axes[0, 1].set_title("Monoloco: validation L1 of mu (m), its selection")
-for ax in axes[0]:
-    ax.set_xlabel("epoch"); ax.legend(fontsize=8)
+# validation NLL of the DRF family, Monoloco's validation L1 (m), its selection; kept epochs starred
+fig = plot_training_curves(curves, P.ped_models)
 save_figure(P.profile, "pedestrians_training_curves", fig)
 plt.show()
 
