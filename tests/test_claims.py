@@ -110,17 +110,28 @@ def test_c4_parity():
     assert claims.c4_in_distribution_parity(mk(4.0, 2.5))["verdict"] == claims.NOT
 
 
-def test_c5_both_higher_picp_and_narrower():
-    def table(drf_picp, drf_mpiw):
-        rows = [{"study": "pedestrians", "model": "drf", "noise": 0.05, "picp": drf_picp, "mpiw": drf_mpiw}]
-        rows += [{"study": "pedestrians", "model": b, "noise": 0.05, "picp": 0.9, "mpiw": 10.0}
-                 for b in ("lstm", "monoloco")]
+def test_c5_over_the_curves():
+    """DRF's PICP–MPIW curve (dropout rates) above each baseline's at each OOD level: reproduced;
+    above one, below the other: partly; below both: not reproduced."""
+    base = [(8.0, 0.86), (10.0, 0.90), (12.0, 0.93)]
+    above, below = [(8.5, 0.92), (10.5, 0.95)], [(8.5, 0.80), (10.5, 0.85)]
+
+    def table(drf, other=base):
+        rows = [{"study": "pedestrians", "model": "drf", "noise": 0.05, "mpiw": w, "picp": p} for w, p in drf]
+        rows += [{"study": "pedestrians", "model": "lstm", "noise": 0.05, "mpiw": w, "picp": p} for w, p in base]
+        rows += [{"study": "pedestrians", "model": "monoloco", "noise": 0.05, "mpiw": w, "picp": p} for w, p in other]
         return pd.DataFrame(rows)
 
     conds, bases = [("pedestrians", 0.05)], {"pedestrians": ["lstm", "monoloco"]}
-    assert claims.c5_intervals_under_shift(table(0.95, 9.0), conds, bases)["verdict"] == claims.REPRODUCED
-    assert claims.c5_intervals_under_shift(table(0.95, 11.0), conds, bases)["verdict"] == claims.PARTLY
-    assert claims.c5_intervals_under_shift(table(0.85, 11.0), conds, bases)["verdict"] == claims.NOT
+    assert claims.c5_intervals_under_shift(table(above), conds, bases)["verdict"] == claims.REPRODUCED
+    higher_monoloco = [(w, p + 0.08) for w, p in base]
+    assert claims.c5_intervals_under_shift(table(above, higher_monoloco), conds, bases)["verdict"] == claims.PARTLY
+    assert claims.c5_intervals_under_shift(table(below), conds, bases)["verdict"] == claims.NOT
+    # one point per model (the default rate only): narrower and higher dominates, wider does not
+    point = lambda p, w: pd.DataFrame([{"study": "pedestrians", "model": m, "noise": 0.05, "picp": pp, "mpiw": ww}
+                                       for m, pp, ww in (("drf", p, w), ("lstm", 0.9, 10.0), ("monoloco", 0.9, 10.0))])
+    assert claims.c5_intervals_under_shift(point(0.95, 9.0), conds, bases)["verdict"] == claims.REPRODUCED
+    assert claims.c5_intervals_under_shift(point(0.95, 11.0), conds, bases)["verdict"] == claims.NOT
 
 
 def test_c6_speedup_thresholds():

@@ -234,7 +234,9 @@ def test_template_matching_reads_clean_and_noisy_frames():
     theta = np.array([[-2.0, -0.5, 0.3, 1.7, 3.0]])
     clean = pend.render_pendulum(theta)
     est = oracle.template_angles(clean, n_angles=1024)
-    assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 2 * np.pi / 1024
+    # the benchmark's rod is drawn hard-edged on the 128-px canvas, so nearby angles can give the
+    # same frame: the match is exact up to that plateau (under a degree), not up to the grid step
+    assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 0.015
     noisy = pend.blend_uniform_noise(clean, np.full(theta.shape, 0.5), np.random.default_rng(0))
     est = oracle.template_angles(noisy, n_angles=1024)
     assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 0.1

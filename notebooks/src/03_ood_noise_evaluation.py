@@ -158,8 +158,9 @@ for group in groups:
 # ## Claims C1–C5, with computed verdicts
 # Each rule is written in the table next to its verdict (`drfkit.claims`); the timing (C6) and
 # gating (C7) rows are added by notebooks 04 and 05. C1 and C2 need the pendulum, C3 and C4 the
-# pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated. C1, C2 and C5
-# are judged once per pendulum protocol (C5 with the one set of pedestrian models in each).
+# pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated, over the same
+# PICP–MPIW curves as C2. C1, C2 and C5 are judged once per pendulum protocol (C5 with the one set of
+# pedestrian models in each).
 
 # %%
 ood_ped = [p for p in P.ped_eval_p if p > P.ped_train_p]
@@ -179,7 +180,7 @@ for protocol in PROTOCOLS["pendulum"] if "pendulum" in P.eval_studies else ["pap
     if protocol == "paper" and ("pedestrians", "paper") in judged:
         rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", "paper")), ood_ped),
                  claims.c4_in_distribution_parity(at_paper_noise[("pedestrians", "paper")], P.ped_train_p)]
-    shift = pd.concat([part(summary, g) for g in judged])
+    shift = pd.concat([curve_summary[g].assign(study=g[0]) for g in judged])  # PICP–MPIW curves, every rate
     rows.append(claims.c5_intervals_under_shift(shift, [(s, lv) for s, _ in judged for lv in shifted[s]], baselines))
     table = claims.upsert(P.profile, rows, protocol=protocol)
     written += [f"{r['id']} ({protocol})" for r in rows]
