@@ -13,6 +13,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import socket
 import tempfile
 import time
@@ -155,8 +156,10 @@ def torch_load_checked(path: str | os.PathLike) -> Any:
         return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         text = str(exc)
-        if "weights_only" in text or "Unsupported" in text or "global" in text.lower():
-            refused = next((line.strip() for line in text.splitlines() if "Unsupported" in line or "GLOBAL" in line),
+        # a refused import (GLOBAL opcode) is code the file wants to run; other unpickling errors of the
+        # safe loader ("Unsupported operand ...") are damaged bytes
+        if re.search(r"GLOBAL|Unsupported global|Unsupported class|not an allowed global", text):
+            refused = next((line.strip() for line in text.splitlines() if "GLOBAL" in line or "global" in line),
                            text.splitlines()[0] if text else "an object that is not plain data")
             raise UnsafeArtefactError(
                 f"refused to load {path}: it holds more than tensors and plain values ({refused}); "
