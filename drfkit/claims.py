@@ -61,6 +61,7 @@ CLAIM_EVIDENCE = {
     "C5": ("03_ood_noise_evaluation", "The paper's figures, redrawn", ["ood_all_metrics.csv", "ood_picp_mpiw.csv"],
            ["pendulum_picp_mpiw.png", "pedestrians_picp_mpiw.png"]),
     "C6": ("04_timing", "Claim C6 and the targets", ["timing.csv"], ["timing_ms_per_frame.png"]),
+    # (after the next paper rerun, gating_summary_train_noise.csv holds the judged gates: add it here)
     "C7a": ("05_competency_gating", "Claim C7, with computed verdicts", ["gating_summary.csv"], ["gating_sweep.png"]),
     "C7b": ("05_competency_gating", "Claim C7, with computed verdicts", ["gating_summary.csv"], ["gating_sweep.png"]),
     "F1": ("01_pendulum_training", "Does the filter filter?", ["pendulum_mechanism.csv"], []),
@@ -295,41 +296,51 @@ def c6_speedup(speedup: float, target: float = 2.93) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------ C7
-def c7_gating(table: pd.DataFrame, study: str) -> dict[str, Any]:
-    """table: rows setting in {no_dropout, random, kalman_gain, always} with picp (fraction), time_ms."""
+def _gating_ours(table: pd.DataFrame, study: str) -> tuple[pd.Series, pd.Series, pd.Series, str]:
     row = lambda s: table[(table["study"] == study) & (table["setting"] == s)].iloc[0]  # noqa: E731
     kg, rnd, always = row("kalman_gain"), row("random"), row("always")
+    ours = (f"KG {100 * kg['picp']:.1f}% at {kg['time_ms']:.3g} ms vs always {100 * always['picp']:.1f}% at "
+            f"{always['time_ms']:.3g} ms, random {100 * rnd['picp']:.1f}%")
+    if "fraction" in table.columns:
+        ours += f"; KG gates {100 * float(kg['fraction']):.0f}% of frames"
+    return kg, rnd, always, ours
+
+
+def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = None) -> dict[str, Any]:
+    """table: rows setting in {no_dropout, random, kalman_gain, always} with picp (fraction), time_ms
+    (and fraction), for gates tuned on validation at the TRAINING noise: a gate is tuned where its
+    user has data, not at the shift it will meet. ``ood_tuned``: the same for gates tuned at the
+    out-of-distribution test level, reported in the row as a labelled reference, not judged."""
+    kg, rnd, always, ours = _gating_ours(table, study)
+    ours = "gate tuned at the training noise: " + ours
+    if ood_tuned is not None:
+        ours += "; for reference, gate tuned at the test noise: " + _gating_ours(ood_tuned, study)[3]
     close = _at_most(always["picp"] - kg["picp"], 0.015)
     cheaper = _at_most(kg["time_ms"], 0.75 * always["time_ms"])
     beats_random = kg["picp"] > rnd["picp"]
-    ours = (f"KG {100 * kg['picp']:.1f}% at {kg['time_ms']:.3g} ms vs always {100 * always['picp']:.1f}% at "
-            f"{always['time_ms']:.3g} ms, random {100 * rnd['picp']:.1f}%")
-    # A gate that selects no frame or every frame is the same computation as random gating
-    # at that fraction: nothing about the Kalman gain is tested.
     lo, hi = GATE_FRACTION_RANGE
     degenerate = "fraction" in table.columns and not (_at_most(lo, float(kg["fraction"]))
                                                       and _at_most(float(kg["fraction"]), hi))
-    if "fraction" in table.columns:
-        ours += f"; KG gates {100 * float(kg['fraction']):.0f}% of frames"
+    tuned = "gates tuned on validation at the training noise (the tuned-at-test-noise gate is a reference only); "
     if study == "pendulum":
         score = int(close) + int(cheaper) + int(beats_random)
         verdict = NOT_TESTABLE if degenerate else REPRODUCED if score == 3 else PARTLY if score == 2 else NOT
         return {"id": "C7a", "claim": "Pendulum: Kalman-gain gating keeps PICP near always-dropout at much less time",
                 "paper": "92.1 % vs 92.9 % (always) at 16.8 vs 28.2 ms; random 86.3 %", "ours": ours,
-                "rule": "three tests: PICP within 1.5 points of always-dropout (about twice the paper's own 0.8-point "
-                        "gap); time <= 0.75 x always (a saving of at least a quarter; the paper's is 40 %); PICP above "
-                        "random gating at equal fraction; reproduced: all three; partly: two; else not reproduced; "
-                        "not testable when the gate selects under 10 % or over 90 % of the frames (then its PICP "
-                        "follows from the fraction, not from the gain)",
+                "rule": tuned + "three tests: PICP within 1.5 points of always-dropout (about twice the paper's own "
+                        "0.8-point gap); time <= 0.75 x always (a saving of at least a quarter; the paper's is 40 %); "
+                        "PICP above random gating at equal fraction; reproduced: all three; partly: two; else not "
+                        "reproduced; not testable when the gate selects under 10 % or over 90 % of the frames (then "
+                        "its PICP follows from the fraction, not from the gain)",
                 "verdict": verdict}
     gain = kg["picp"] - rnd["picp"]
     verdict = (NOT_TESTABLE if degenerate else REPRODUCED if _at_most(abs(gain), 0.01)
                else PARTLY if _at_most(abs(gain), 0.03) else NOT)
     return {"id": "C7b", "claim": "Pedestrians: Kalman-gain gating brings no clear gain over random gating",
             "paper": "87.7 % (KG) vs 87.4 % (random)", "ours": ours + f"; KG - random = {100 * gain:+.1f} pt",
-            "rule": "reproduced: |PICP_KG - PICP_random| <= 1 point (no gain, as the paper found: its gap is 0.3 "
-                    "points); partly: <= 3 points; else not reproduced; not testable when the gate selects under "
-                    "10 % or over 90 % of the frames",
+            "rule": tuned + "reproduced: |PICP_KG - PICP_random| <= 1 point (no gain, as the paper found: its gap "
+                    "is 0.3 points); partly: <= 3 points; else not reproduced; not testable when the gate selects "
+                    "under 10 % or over 90 % of the frames",
             "verdict": verdict}
 
 

@@ -316,3 +316,13 @@ def test_c5_saturated_comparisons_are_left_out():
     row = claims.c5_intervals_under_shift(pd.DataFrame(rows), [("pendulum", 0.75)],
                                           {"pendulum": ["lstm", "no_dynamics"]})
     assert row["verdict"] == claims.REPRODUCED and "not informative" in row["ours"]  # 1 of 1 informative
+
+
+def test_c7_judges_the_training_noise_gate_and_labels_the_other_as_reference():
+    trained = gating("pendulum", 0.92, 0.86, 0.93).assign(fraction=0.0)  # tuned at the training noise: no frame
+    ood = gating("pendulum", 0.92, 0.86, 0.93).assign(fraction=0.5)       # tuned at the test noise: fine
+    row = claims.c7_gating(trained, "pendulum", ood_tuned=ood)
+    assert row["verdict"] == claims.NOT_TESTABLE  # the judged gate is the one tuned at the training noise
+    assert row["ours"].startswith("gate tuned at the training noise: ")
+    assert "for reference, gate tuned at the test noise: " in row["ours"] and "gates 50% of frames" in row["ours"]
+    assert claims.c7_gating(ood, "pendulum", ood_tuned=trained)["verdict"] == claims.REPRODUCED

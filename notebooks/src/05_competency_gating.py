@@ -193,13 +193,28 @@ plt.show()
 
 # %% [markdown]
 # ## Claim C7, with computed verdicts
-# Mean over seeds. C7a (pendulum): PICP within 1.5 points of always-dropout, at most 0.75× its
-# time, and above random gating. C7b (pedestrians): Kalman-gain and random gating about equal,
-# as the paper found. `time_ms` is the whole inference per frame. C7a per pendulum protocol.
+# A user tunes a gate where they have data: at the training noise, not at the shift it will meet.
+# So C7 is judged on gates tuned on validation at the *training* noise (the same study, timed the
+# same way); the gates tuned at the test noise above stay in each row as a labelled reference. Mean
+# over seeds. C7a (pendulum): PICP within 1.5 points of always-dropout, at most 0.75× its time, and
+# above random gating. C7b (pedestrians): Kalman-gain and random gating about equal, as the paper
+# found. A gate that selects under 10 % or over 90 % of the frames is not informative. `time_ms` is
+# the whole inference per frame. C7a per pendulum protocol.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+TRAIN_NOISE = {"pendulum": P.pend_train_max_noise, "pedestrians": P.ped_train_p}
+runs_train = {g: cached(P.profile, gating.gating_study, P, g[0], models=models[g], val_noise=TRAIN_NOISE[g[0]],
+                        timing=True) for g in GROUPS}
+table_train = pd.concat([r["table"].assign(protocol=g[1]) for g, r in runs_train.items()], ignore_index=True)
+summary_train = summarise(table_train, ["study", "protocol", "setting"], values)
+_ = save_table(P.profile, "gating_summary_train_noise", summary_train)
+summary_train[["study", "protocol", "setting", "fraction", "picp", "time_ms"]].round(4)
 
 # %%
 for study, protocol in GROUPS:
-    row = claims.c7_gating(summary[summary["protocol"] == protocol], study)
+    row = claims.c7_gating(summary_train[summary_train["protocol"] == protocol], study,
+                           ood_tuned=summary[summary["protocol"] == protocol])
     claims_table = claims.upsert(P.profile, [row], protocol=protocol)
     # C7a's verdict rests on measured times, which differ between machines: nbval must not compare it
     # (it is in the table below); C7b's rests on PICP alone
