@@ -162,6 +162,23 @@ def summarise_ablation(table: pd.DataFrame) -> pd.DataFrame:
             .sort_values("mae_blackout").round(4).reset_index())
 
 
+MARKDOWN_COLUMNS = {"variant": "variant", "kind": "model", "n_seeds": "seeds", "mae_0.5": "MAE 0.5",
+                    "mae_0.75": "MAE 0.75", "mae_1": "MAE 1.0", "mae_blackout": "blackout",
+                    "r_noise_spearman": "ρ(r, noise)", "gain_ratio_blackout": "gain pure/clean",
+                    "prior_ratio": "‖Fz−w‖/‖z−w‖"}
+
+
+def summary_markdown(summary: pd.DataFrame) -> str:
+    """The summary as the markdown table that docs/dynamics.md quotes (seed means on validation;
+    tests/test_prose_numbers.py checks the quoted table against the rows on disk)."""
+    cols = [c for c in MARKDOWN_COLUMNS if c in summary]
+    lines = ["| " + " | ".join(MARKDOWN_COLUMNS[c] for c in cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in summary.iterrows():
+        cells = [("" if pd.isna(r[c]) else f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c])) for c in cols]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def round2_reading(summary: pd.DataFrame) -> str:
     """What the second round's summary (``summarise_ablation``) says, in sentences written from
     its numbers: per model kind the variant with the lowest validation MAE at the training noise,
@@ -196,9 +213,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--out", default=None, help="folder (default results/ablation)")
     parser.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
+    parser.add_argument("--markdown", action="store_true", help="with --summary: as the markdown table docs/ quote")
     args = parser.parse_args(argv)
     if args.summary:
-        print(summarise_ablation(ablation_table(args.budget, args.out)).to_string(index=False))
+        summary = summarise_ablation(ablation_table(args.budget, args.out))
+        print(summary_markdown(summary) if args.markdown else summary.to_string(index=False))
         return 0
     for name in args.variants:
         try:
