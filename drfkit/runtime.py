@@ -2,6 +2,7 @@
 device, and open its manifest entry."""
 from __future__ import annotations
 
+import atexit
 import os
 import random
 from typing import Any
@@ -69,6 +70,16 @@ def hold_profile(profile: str) -> None:
         return
     from drfkit.io import exclusive_lock
 
-    lock = exclusive_lock(root / PIPELINE_LOCK, f"profile {profile} (results {root})", announce_stale=True)
-    lock.__enter__()  # released when the kernel exits (the OS drops the flock with the process)
+    # silent about a stale holder: a kernel closed with its notebook leaves its name behind, and that
+    # is no news to whoever opens the next notebook (a pipeline taking over says so)
+    lock = exclusive_lock(root / PIPELINE_LOCK, f"profile {profile} (results {root})", announce_stale=False)
+    lock.__enter__()  # released at the kernel's exit, or by the OS with the process (kill -9 included)
     _HELD[str(root.resolve())] = lock
+    atexit.register(_release, lock)
+
+
+def _release(lock) -> None:
+    try:
+        lock.__exit__(None, None, None)  # empties the holder's name, then releases the flock
+    except Exception:  # noqa: BLE001 -- at interpreter exit, a lock file already gone is fine
+        pass

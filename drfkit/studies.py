@@ -54,10 +54,15 @@ TRAINING_BLACKOUT_SEED_OFFSET = 7  # which training sequences get a blackout: da
 
 
 def _pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+    from drfkit.data.pendulum import GENERATOR_VERSION
+
     key = {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
                                         "pend_train_max_noise", "pend_data_seed")}
     blackouts = protocol_spec(protocol, "drf")["blackouts"]
-    return key | ({"train_blackouts": blackouts} if blackouts else {})  # the paper's key unchanged
+    # a run trained on other frames is another run: since generator 2 (the benchmark's own frames) the
+    # generator enters the key; runs on the first generator's frames keep the names they had
+    frames = {"frames": GENERATOR_VERSION} if GENERATOR_VERSION != 1 else {}
+    return key | ({"train_blackouts": blackouts} if blackouts else {}) | frames
 
 
 # ------------------------------------------------------------------------- pedestrians

@@ -58,7 +58,7 @@ def test_mse_fits_only_the_mean():
     mean, sigma, targets, mask = values(3)
     loss = mse(mean, sigma, targets, mask)
     valid = mask.unsqueeze(-1).expand_as(mean)
-    assert float(loss) == pytest.approx(float((0.5 * (targets - mean) ** 2)[valid].mean()), rel=1e-6)
+    assert loss.item() == pytest.approx((0.5 * (targets - mean) ** 2)[valid].mean().item(), rel=1e-6)
     loss.backward()
     assert sigma.grad is None
 
