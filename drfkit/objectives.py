@@ -1,4 +1,5 @@
-"""Training objectives of the DRF family: what the gradient asks of the mean and of sigma.
+"""Training objectives of the DRF family (what the gradient asks of the mean and of sigma), and the
+optimiser, schedule and random windows that ``drfkit.train`` fits them with.
 
 Every objective takes ``mean``, ``sigma``, ``targets`` of one shape (B, T, out) and a (B, T)
 bool ``mask`` of real frames (None = all), and returns the mean over the valid values.
@@ -69,4 +70,33 @@ def objective_loss(model, objective: str, beta: float, mean, sigma, targets, mas
     raise ValueError(f"unknown training objective {objective!r}; choose from {OBJECTIVES}")
 
 
-__all__ = ["OBJECTIVES", "beta_nll", "mse", "objective_loss"]
+def make_optimiser(model, cfg):
+    """Adam (AdamW when ``cfg.weight_decay`` > 0) and its schedule (``cfg.lr_schedule``), stepped once
+    per epoch; ``cfg`` a ``drfkit.train.TrainConfig``."""
+    if cfg.weight_decay > 0:
+        optimiser = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    else:
+        optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    if cfg.lr_schedule == "cosine":
+        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=cfg.epochs, eta_min=0.0)
+    else:
+        scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
+    return optimiser, scheduler
+
+
+def random_windows(inputs: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor | None, window: int,
+                   generator: torch.Generator):
+    """One window of ``window`` consecutive frames per sequence, its start uniform in [0, T - window]:
+    (B, T, ...) -> (B, window, ...). Sequences no longer than ``window`` are returned whole."""
+    b, t = targets.shape[:2]
+    if t <= window:
+        return inputs, targets, mask
+    start = torch.randint(0, t - window + 1, (b,), generator=generator)
+    rows = torch.arange(b)[:, None]
+    cols = start[:, None] + torch.arange(window)[None, :]  # (B, window)
+    dev = targets.device
+    rows, cols = rows.to(dev), cols.to(dev)
+    return inputs[rows, cols], targets[rows, cols], None if mask is None else mask[rows, cols]
+
+
+__all__ = ["OBJECTIVES", "beta_nll", "make_optimiser", "mse", "objective_loss", "random_windows"]

@@ -28,7 +28,7 @@ from typing import Any, Callable
 import torch
 
 from drfkit.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
-from drfkit.objectives import objective_loss
+from drfkit.objectives import make_optimiser, objective_loss, random_windows
 
 CHECKPOINT_FORMAT = 1
 
@@ -292,34 +292,6 @@ def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None)
     atomic_torch_save(best_path, best)
 
 
-def _optimiser(model, cfg: TrainConfig):
-    """Adam (AdamW when weight_decay > 0) and its schedule, stepped once per epoch."""
-    if cfg.weight_decay > 0:
-        optimiser = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    else:
-        optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    if cfg.lr_schedule == "cosine":
-        scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=cfg.epochs, eta_min=0.0)
-    else:
-        scheduler = torch.optim.lr_scheduler.StepLR(optimiser, step_size=cfg.lr_step or 10**9, gamma=cfg.lr_gamma)
-    return optimiser, scheduler
-
-
-def random_windows(inputs: torch.Tensor, targets: torch.Tensor, mask: torch.Tensor | None, window: int,
-                   generator: torch.Generator):
-    """One window of ``window`` consecutive frames per sequence, its start uniform in [0, T - window]:
-    (B, T, ...) -> (B, window, ...). Sequences no longer than ``window`` are returned whole."""
-    b, t = targets.shape[:2]
-    if t <= window:
-        return inputs, targets, mask
-    start = torch.randint(0, t - window + 1, (b,), generator=generator)
-    rows = torch.arange(b)[:, None]
-    cols = start[:, None] + torch.arange(window)[None, :]  # (B, window)
-    dev = targets.device
-    rows, cols = rows.to(dev), cols.to(dev)
-    return inputs[rows, cols], targets[rows, cols], None if mask is None else mask[rows, cols]
-
-
 def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, data_key, device, progress,
                   stop_after_epochs, fresh_train=None) -> TrainResult:
     from drfkit.models import build_model
@@ -334,7 +306,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
 
     torch.manual_seed(cfg.seed)
     model = build_model(model_config).to(device)
-    optimiser, scheduler = _optimiser(model, cfg)
+    optimiser, scheduler = make_optimiser(model, cfg)
     result = TrainResult(best_path=best_path, last_path=last_path)
     start_epoch, best = 0, None
 

@@ -9,9 +9,9 @@ from drfkit.data.noise import Noise
 from drfkit.data.pendulum import generate_pendulum, redraw_noise
 from drfkit.io import torch_load_checked
 from drfkit.models import gaussian_nll
-from drfkit.objectives import beta_nll, mse, objective_loss
+from drfkit.objectives import beta_nll, mse, objective_loss, random_windows
 from drfkit.studies import model_config
-from drfkit.train import SequenceData, TrainConfig, fingerprint, random_windows, train_model
+from drfkit.train import SequenceData, TrainConfig, fingerprint, train_model
 
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
