@@ -15,6 +15,8 @@ bool ``mask`` of real frames (None = all), and returns the mean over the valid v
 * ``mse``      -- (y - mu)^2 / 2 on the mean alone; sigma gets no gradient (used as a warm-up:
   ``TrainConfig.mse_warmup`` epochs of it before the objective, the staged fit that BackpropKF and
   Kloss et al. 2021 recommend when a sensor model does not learn under the NLL).
+
+``batch_loss`` adds, for a filter, the same objective on its one-step prior (``prior_weight``).
 """
 from __future__ import annotations
 
@@ -70,6 +72,27 @@ def objective_loss(model, objective: str, beta: float, mean, sigma, targets, mas
     raise ValueError(f"unknown training objective {objective!r}; choose from {OBJECTIVES}")
 
 
+def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, prior_weight: float = 0.0
+               ) -> torch.Tensor:
+    """The training loss of one batch: ``objective_loss`` of the model's output and, with
+    ``prior_weight`` > 0, that weight times the same objective of the one-step prior decoded for
+    frames 1..T-1 (``forward_with_prior``; a filter's prediction of each frame before seeing it,
+    so the transition is trained to predict rather than only to carry the posterior)."""
+    if prior_weight <= 0:
+        mean, sigma = model(inputs)
+        return objective_loss(model, objective, beta, mean, sigma, targets, mask)
+    if not hasattr(model, "forward_with_prior"):
+        raise ValueError(f"TrainConfig.prior_weight = {prior_weight} asks for the one-step prior's loss, but "
+                         f"{type(model).__name__} has no filter prior; set prior_weight = 0 for it")
+    (mean, sigma), (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
+    loss = objective_loss(model, objective, beta, mean, sigma, targets, mask)
+    if targets.shape[1] < 2:
+        return loss
+    prior_mask = None if mask is None else mask[:, 1:]
+    return loss + prior_weight * objective_loss(model, objective, beta, prior_mean, prior_sigma,
+                                                targets[:, 1:], prior_mask)
+
+
 def make_optimiser(model, cfg):
     """Adam (AdamW when ``cfg.weight_decay`` > 0) and its schedule (``cfg.lr_schedule``), stepped once
     per epoch; ``cfg`` a ``drfkit.train.TrainConfig``."""
@@ -99,4 +122,4 @@ def random_windows(inputs: torch.Tensor, targets: torch.Tensor, mask: torch.Tens
     return inputs[rows, cols], targets[rows, cols], None if mask is None else mask[rows, cols]
 
 
-__all__ = ["OBJECTIVES", "beta_nll", "make_optimiser", "mse", "objective_loss", "random_windows"]
+__all__ = ["OBJECTIVES", "batch_loss", "beta_nll", "make_optimiser", "mse", "objective_loss", "random_windows"]

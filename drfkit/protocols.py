@@ -49,6 +49,7 @@ FIT_THE_MEAN = {"objective": "beta_nll", "beta": 1.0, "lr_schedule": "cosine", "
                 "window": 25, "batch_size": 16, "select_on": "l1"}
 _FIT_NLL = FIT_THE_MEAN | {"objective": "nll"}
 _FIT_STAGED = FIT_THE_MEAN | {"objective": "nll", "mse_warmup": "half"}  # MSE for half the epochs, then NLL
+_FIT_PRIOR = FIT_THE_MEAN | {"prior_weight": 1.0}  # the one-step prior fitted with the same weight as the posterior
 ROUND2_VARIANTS = {
     "fit_paper": {"kind": "drf", "train": FIT_THE_MEAN},
     "fit_paper_blackout": {"kind": "drf", "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
@@ -65,6 +66,13 @@ ROUND2_VARIANTS = {
                                  "blackouts": BLACKOUT_TRAINING},
     "fit_split_book": {"kind": "drf", "model": BOOK_DRF | {"decoder_split": True}, "train": FIT_THE_MEAN,
                        "blackouts": BLACKOUT_TRAINING},
+    # a filter lever: the one-step prior z_{t|t-1} decoded and fitted too (the transition must predict)
+    "fit_prior_paper_blackout": {"kind": "drf", "train": _FIT_PRIOR, "blackouts": BLACKOUT_TRAINING},
+    "fit_prior_split_book": {"kind": "drf", "model": BOOK_DRF | {"decoder_split": True}, "train": _FIT_PRIOR,
+                             "blackouts": BLACKOUT_TRAINING},
+    # a filter lever: Q learned but constant in time (the paper's LSTM transition emits q_t per step)
+    "fit_constq_paper_blackout": {"kind": "drf", "model": {"constant_q": True}, "train": FIT_THE_MEAN,
+                                  "blackouts": BLACKOUT_TRAINING},
 }
 VARIANTS.update(ROUND2_VARIANTS)
 

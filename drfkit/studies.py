@@ -62,7 +62,8 @@ def _pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
     # a run trained on other frames is another run: since generator 2 (the benchmark's own frames) the
     # generator enters the key; runs on the first generator's frames keep the names they had
     frames = {"frames": GENERATOR_VERSION} if GENERATOR_VERSION != 1 else {}
-    return key | ({"train_blackouts": blackouts} if blackouts else {}) | frames
+    fresh = {"fresh_noise": True} if protocol_spec(protocol, "drf")["train"].get("fresh_noise") else {}
+    return key | ({"train_blackouts": blackouts} if blackouts else {}) | frames | fresh
 
 
 # ------------------------------------------------------------------------- pedestrians
@@ -168,8 +169,11 @@ def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -
     published schedule -- StepLR(20, 0.9), single frames, no gradient clipping, and the epoch
     selected on validation L1 of mu."""
     if study == "pendulum" and protocol == "book":  # the book's schedule: its own profile keys
+        recipe = recipe_fields(protocol_spec(protocol, kind))
+        if recipe.get("mse_warmup") == "half":
+            recipe["mse_warmup"] = P.pend_book_epochs // 2
         return TrainConfig(epochs=P.pend_book_epochs, lr=P.pend_book_lr, batch_size=P.pend_book_batch_size,
-                           seed=seed, patience=P.pend_book_patience)
+                           seed=seed, patience=P.pend_book_patience, **recipe)
     if study == "pendulum":
         return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed,
                            patience=P.pend_patience)
@@ -178,6 +182,36 @@ def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -
         return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
                            seed=seed, lr_step=20, lr_gamma=0.9, framewise=True, grad_clip=None, select_on="l1")
     return TrainConfig(epochs=P.ped_epochs, lr=P.ped_lr, batch_size=P.ped_batch_size, seed=seed)
+
+
+# what the profile owns of a schedule; a variant's ``train`` recipe (``drfkit.protocols``) sets the rest
+PROFILE_SCHEDULE = ("epochs", "lr", "batch_size", "patience")
+
+
+def recipe_fields(spec: dict[str, Any]) -> dict[str, Any]:
+    """The ``TrainConfig`` fields of a variant's training recipe (objective, beta, schedule, windows,
+    selection, prior weight) at paper scale: the profile's schedule keys and the data's business
+    (``fresh_noise``) left out."""
+    return {k: v for k, v in spec["train"].items() if k not in PROFILE_SCHEDULE and k != "fresh_noise"}
+
+
+def fresh_training(P, protocol: str, noise: Noise | float | None = None):
+    """``fresh_train(epoch)`` for ``drfkit.train.train_model`` when the protocol redraws the training
+    noise every epoch (None otherwise): the training split's clean frames under new noise (and new
+    blackouts), drawn from ``pend_data_seed * 1000 + epoch`` alone, so a resumed run sees what an
+    uninterrupted one saw."""
+    from drfkit.data.pendulum import redraw_noise
+
+    spec = protocol_spec(protocol, "drf")
+    if not spec["train"].get("fresh_noise"):
+        return None
+    clean, level = pendulum_split(P, "train", noise), study_noise(P, "pendulum", noise)
+
+    def fresh(epoch: int) -> SequenceData:
+        arrays = redraw_noise(clean, level, P.pend_data_seed * 1000 + epoch, spec["blackouts"])
+        return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
+
+    return fresh
 
 
 def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper"):
@@ -203,13 +237,14 @@ def train_models(P, study: str, progress: bool = True, kinds: list[str] | None =
     device = pick_device(P.device)
     train, val = study_data(P, study, "train", None, protocol), study_data(P, study, "val", None, protocol)
     data_key = param_hash(study_data_key(P, study, protocol))
+    fresh = fresh_training(P, protocol) if study == "pendulum" else None
     results, curves = {}, []
     for kind in kinds or study_models(P, study):
         for seed in seeds or P.seeds:
             res = train_model(model_config(study, kind, P, protocol), train, val,
                               train_config(P, study, kind, seed, protocol),
                               checkpoint_stem(P, study, kind, seed, protocol), data_key=data_key, device=device,
-                              progress=progress)
+                              progress=progress, fresh_train=fresh)
             results[(kind, seed)] = res
             curve = history_frame(res.history)
             curve.insert(0, "seed", seed)

@@ -28,7 +28,7 @@ from typing import Any, Callable
 import torch
 
 from drfkit.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
-from drfkit.objectives import make_optimiser, objective_loss, random_windows
+from drfkit.objectives import batch_loss, make_optimiser, random_windows
 
 CHECKPOINT_FORMAT = 1
 
@@ -111,6 +111,7 @@ class TrainConfig:
     lr_schedule: str = "step"  # step (StepLR by lr_step / lr_gamma; constant without lr_step) or cosine (to 0 at epochs)
     weight_decay: float = 0.0  # decoupled (AdamW) when > 0
     window: int | None = None  # train on one random window of this many frames per sequence and epoch
+    prior_weight: float = 0.0  # weight of the loss on a filter's one-step prior (drfkit.objectives.batch_loss)
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
@@ -139,6 +140,8 @@ class TrainConfig:
         if self.window is not None and (isinstance(self.window, bool) or not isinstance(self.window, int)
                                         or self.window < 2):
             raise ValueError(f"TrainConfig.window must be None (whole sequences) or an integer >= 2, got {self.window!r}")
+        if not (isinstance(self.prior_weight, (int, float)) and self.prior_weight >= 0):
+            raise ValueError(f"TrainConfig.prior_weight must be a number >= 0 (0 = no prior loss), got {self.prior_weight!r}")
 
 
 SELECTION_METRICS = ("loss", "l1")
@@ -146,7 +149,7 @@ LR_SCHEDULES = ("step", "cosine")
 # Fields added after checkpoints were committed: at these values they stay out of names and
 # fingerprints, so every run made before them keeps its files (and resumes).
 LATER_FIELDS = {"select_on": "loss", "objective": "model", "beta": 1.0, "mse_warmup": 0, "lr_schedule": "step",
-                "weight_decay": 0.0, "window": None}
+                "weight_decay": 0.0, "window": None, "prior_weight": 0.0}
 
 
 def _train_fields(cfg: "TrainConfig") -> dict[str, Any]:
@@ -366,8 +369,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
             inputs, targets, mask = data.batch(idx, device)
             if cfg.window is not None:
                 inputs, targets, mask = random_windows(inputs, targets, mask, cfg.window, windows)
-            mean, sigma = model(inputs)
-            loss = objective_loss(model, objective, cfg.beta, mean, sigma, targets, mask)
+            loss = batch_loss(model, objective, cfg.beta, inputs, targets, mask, cfg.prior_weight)
             if not torch.isfinite(loss):
                 raise NonFiniteLossError(
                     f"non-finite loss {loss.item()} at epoch {epoch + 1}, step {step} (sequences "

@@ -136,3 +136,90 @@ def test_redraw_noise_keeps_clean_frames_and_targets():
     assert not np.array_equal(new["images"], arrays["images"])
     with pytest.raises(ValueError, match="rkn_uniform"):
         redraw_noise(arrays, Noise("salt_and_pepper", 0.5), seed=7)
+
+
+# --- filter levers: the one-step prior's loss and a constant Q -------------------------------------
+
+def _drf(**options):
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    return build_model(default_config("drf", "pendulum", 2, latent=4, feature_dim=8, decoder_hidden=8,
+                                      transition_hidden=8, **options)).eval()
+
+
+def _frames(b=3, t=6, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return torch.randint(0, 256, (b, t, 24, 24), dtype=torch.uint8, generator=g), torch.randn(b, t, 2, generator=g)
+
+
+@pytest.mark.parametrize("options", [{}, {"constant_q": True}, {"transition_kind": "basis", "memory_dims": 1}])
+def test_the_prior_is_the_predict_step_of_the_filter(options):
+    """forward_with_prior decodes z_{t|t-1} = F_t z_{t-1} and diag(F_t P_{t-1} F_t^T + Q_t), recomputed
+    here with drfkit.filter.kalman_predict from the filter's own F_t, q_t and posteriors."""
+    from drfkit.filter import kalman_predict
+    from drfkit.models.parts import mean_and_log_variance
+
+    model = _drf(**options)
+    inputs, _ = _frames()
+    with torch.no_grad():
+        w, r = model.observe(inputs)
+        trace = model.filter_steps(w, r, return_transition=True, return_prior=True)
+        _, (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
+        # P_{t-1} in full: rerun the filter step by step
+        from drfkit.filter import kalman_step
+
+        z, P = w[:, 0], torch.diag_embed(r[:, 0])
+        for t in range(1, inputs.shape[1]):
+            z_pred, P_pred = kalman_predict(z, P, trace["F"][:, t - 1], trace["q"][:, t - 1])
+            torch.testing.assert_close(trace["z_prior"][:, t - 1], z_pred)
+            torch.testing.assert_close(trace["p_prior"][:, t - 1], P_pred.diagonal(dim1=-2, dim2=-1))
+            z, P, _ = kalman_step(z, P, trace["F"][:, t - 1], trace["q"][:, t - 1], w[:, t], r[:, t])
+        expected = model.head(mean_and_log_variance(trace["z_prior"], trace["p_prior"]))
+    torch.testing.assert_close(prior_mean, expected[0])
+    torch.testing.assert_close(prior_sigma, expected[1])
+    assert prior_mean.shape == (3, 5, 2)
+
+
+def test_batch_loss_adds_the_weighted_prior_loss():
+    from drfkit.objectives import batch_loss
+
+    model = _drf()
+    inputs, targets = _frames()
+    mask = torch.ones(targets.shape[:2], dtype=torch.bool)
+    mask[0, 4:] = False
+    with torch.no_grad():
+        post = batch_loss(model, "beta_nll", 1.0, inputs, targets, mask, prior_weight=0.0)
+        both = batch_loss(model, "beta_nll", 1.0, inputs, targets, mask, prior_weight=0.5)
+        (_, _), (pm, ps) = model.forward_with_prior(inputs)
+        prior = beta_nll(pm, ps, targets[:, 1:], mask[:, 1:], beta=1.0)
+    torch.testing.assert_close(both, post + 0.5 * prior)
+    from drfkit.models import build_model, default_config
+
+    lstm = build_model(default_config("lstm", "pendulum", 2, latent=4, feature_dim=8, decoder_hidden=8))
+    with pytest.raises(ValueError, match="prior_weight = 0 for it"):
+        batch_loss(lstm, "nll", 0.0, inputs, targets, None, prior_weight=1.0)
+
+
+def test_constant_q_is_learned_and_the_same_at_every_step():
+    model = _drf(constant_q=True)
+    assert model.config["constant_q"] is True and "constant_q" not in _drf().config  # paper configs unchanged
+    inputs, targets = _frames()
+    with torch.no_grad():
+        q = model.filter_steps(*model.observe(inputs), return_transition=True)["q"]      # (B, T-1, n)
+    torch.testing.assert_close(q, model.transition.log_q.exp().expand_as(q))
+    model.train()
+    mean, sigma = model(inputs)  # the per-step loop (the one-node recursion knows only the q head)
+    gaussian_nll(mean, sigma, targets).backward()
+    assert model.transition.log_q.grad is not None and model.transition.log_q.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="constant already"):
+        _drf(constant_q=True, transition_kind="basis")
+
+
+def test_prior_weight_is_checked_and_stays_out_of_old_names():
+    from drfkit.train import naming_fields
+
+    with pytest.raises(ValueError, match="prior_weight"):
+        TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0, prior_weight=-1.0)
+    assert "prior_weight" not in naming_fields(TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0))
+    assert naming_fields(TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0, prior_weight=1.0))["prior_weight"] == 1.0

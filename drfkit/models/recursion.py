@@ -21,6 +21,7 @@ O = n * n + n head outputs (F_t's n x n residual, then q_t's pre-activation).
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import torch
@@ -101,10 +102,15 @@ class TransitionNetwork(nn.Module):
     filter has F = I: a random-walk prior, which is stable from the first step.
     """
 
-    def __init__(self, latent: int = 30, hidden: int = 64):
+    def __init__(self, latent: int = 30, hidden: int = 64, constant_q: bool = False, q_init: float = 0.1):
         super().__init__()
         self.latent = latent
         self.hidden = hidden
+        # constant_q: Q = diag(exp(log_q)), learned but the same at every step and for every
+        # sequence (as the RKN's), so the filter cannot buy a large gain by inflating Q on the fly
+        self.constant_q = constant_q
+        if constant_q:
+            self.log_q = nn.Parameter(torch.full((latent,), math.log(q_init)))
         self.cell1 = nn.LSTMCell(latent, hidden)
         self.cell2 = nn.LSTMCell(hidden, hidden)
         self.head = nn.Linear(hidden, latent * latent + latent)
@@ -125,7 +131,10 @@ class TransitionNetwork(nn.Module):
 
     def forward(self, z: torch.Tensor, state: tuple[torch.Tensor, ...]
                 ) -> tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
-        return transition_step(z, state, self.weights(), self.eye)
+        F_t, q_t, state = transition_step(z, state, self.weights(), self.eye)
+        if self.constant_q:
+            q_t = self.log_q.exp().expand(z.shape[0], self.latent)                    # (B, n)
+        return F_t, q_t, state
 
 
 def _forward_loop(w, r, eye, hidden, weights):

@@ -344,6 +344,11 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                                    MEMORY_VARIANCE; at t = 0 the prior z = 0, P = 1): room in
                                    the state for what one frame cannot show, such as velocity
       ``noise_head='log'``         r on a bounded log scale (``ObservationHeads``)
+      ``constant_q=True``          Q = diag(exp(log q)), learned, the same at every step (the LSTM
+                                   transition's; the basis transition's Q is constant already)
+
+    ``forward_with_prior`` also decodes the one-step prediction z_{t|t-1}, P_{t|t-1}, so a training
+    loss can ask the transition to predict (``TrainConfig.prior_weight``).
     """
 
     kind = "drf"
@@ -354,7 +359,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  transition_hidden: int = 64, transition_kind: str = "lstm", n_basis: int = 16,
-                 memory_dims: int = 0, **kwargs: Any):
+                 memory_dims: int = 0, constant_q: bool = False, **kwargs: Any):
         if isinstance(transition_hidden, bool) or not isinstance(transition_hidden, int) \
                 or transition_hidden < 1:
             raise ValueError(f"transition_hidden must be a positive int, got {transition_hidden!r}")
@@ -362,17 +367,26 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
             raise ValueError(f"transition_kind must be one of {TRANSITION_KINDS}, got {transition_kind!r}")
         if isinstance(memory_dims, bool) or not isinstance(memory_dims, int) or not 0 <= memory_dims < latent:
             raise ValueError(f"memory_dims must be an int in [0, latent = {latent}), got {memory_dims!r}")
+        if not isinstance(constant_q, bool):
+            raise ValueError(f"constant_q must be True or False, got {constant_q!r}")
+        if constant_q and transition_kind != "lstm":
+            raise ValueError(f"constant_q is an option of the LSTM transition; the {transition_kind!r} "
+                             "transition's Q is constant already")
         extra: dict[str, Any] = {"transition_hidden": transition_hidden}
         if transition_kind != "lstm":  # as noise_head: only what departs from the paper enters the config
             extra |= {"transition_kind": transition_kind, "n_basis": n_basis}
         if memory_dims:
             extra["memory_dims"] = memory_dims
+        if constant_q:
+            extra["constant_q"] = True
         super().__init__(input_kind, out_dim, latent, _extra_config=extra, **kwargs)
         self.transition_kind, self.memory_dims = transition_kind, memory_dims
         if transition_kind == "basis":
             self.transition = BasisTransition(latent, transition_hidden, n_basis)
         else:
-            self.transition = TransitionNetwork(latent, transition_hidden)
+            self.transition = TransitionNetwork(latent, transition_hidden, constant_q=constant_q)
+        # the one-node recursion differentiates the LSTM transition's own q head only
+        self._one_node = transition_kind == "lstm" and not constant_q
 
     def observe(self, inputs: torch.Tensor, starts: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
         """w, r (B, T, n); ``starts``: inputs[:, 0] is a sequence's first frame, where a memory
@@ -402,7 +416,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         """
         check_observations(w, r, self.latent)
         whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
-        if whole_sequence and self.transition_kind == "lstm" and not return_gains and torch.is_grad_enabled() and (
+        if whole_sequence and self._one_node and not return_gains and torch.is_grad_enabled() and (
                 w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
             z, p_diag = drf_recursion(self.transition, w, r)
             return z, p_diag, None
@@ -410,12 +424,14 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         return trace["z"], trace["p_diag"], trace.get("gains")
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
-                     return_transition: bool = False) -> dict[str, torch.Tensor]:
+                     return_transition: bool = False, return_prior: bool = False) -> dict[str, torch.Tensor]:
         """The per-step filter loop on w, r (B, T, n), recording what was asked.
 
         Always: 'z', 'p_diag' (B, T, n). ``return_gains``: 'gains' K (B, T, n, n), I at t = 0.
         ``return_transition``: 'F' (B, T-1, n, n), F_t for t = 1..T-1; 'q' (B, T-1, n); 'z_prior'
         (B, T-1, n) = F_t z_{t-1}, the prediction of z_t before w_t is seen.
+        ``return_prior``: 'z_prior' and 'p_prior' (B, T-1, n) = diag(F_t P_{t-1} F_t^T) + q_t, the
+        prior's variances.
         """
         batch, steps, n = w.shape
         # unbind once: indexing w[:, t] in the loop would make the backward pass build
@@ -425,12 +441,16 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         P = torch.diag_embed(p_diag)
         means, variances = [z], [p_diag]
         gains = [self.transition.eye.expand(batch, n, n)] if return_gains else None
-        Fs, qs, priors = [], [], []
+        Fs, qs, priors, prior_vars = [], [], [], []
         state = self.transition.initial_state(batch, w)
         for t in range(1, steps):
             F_t, q_t, state = self.transition(z, state)
             if return_transition:
-                Fs.append(F_t), qs.append(q_t), priors.append((F_t @ z.unsqueeze(-1)).squeeze(-1))
+                Fs.append(F_t), qs.append(q_t)
+            if return_transition or return_prior:
+                priors.append((F_t @ z.unsqueeze(-1)).squeeze(-1))
+            if return_prior:  # diag(F P F^T) without forming the product
+                prior_vars.append(torch.einsum("bij,bjk,bik->bi", F_t, P, F_t) + q_t)
             z, P, K = kalman_step(z, P, F_t, q_t, w_steps[t], r_steps[t])
             means.append(z)
             variances.append(P.diagonal(dim1=-2, dim2=-1))
@@ -439,12 +459,25 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         out = {"z": torch.stack(means, dim=1), "p_diag": torch.stack(variances, dim=1)}
         if gains is not None:
             out["gains"] = torch.stack(gains, dim=1)
+        empty = w.new_empty(batch, 0, n)
         if return_transition:
-            empty = w.new_empty(batch, 0, n)
             out["F"] = torch.stack(Fs, dim=1) if Fs else w.new_empty(batch, 0, n, n)
             out["q"] = torch.stack(qs, dim=1) if qs else empty
+        if return_transition or return_prior:
             out["z_prior"] = torch.stack(priors, dim=1) if priors else empty
+        if return_prior:
+            out["p_prior"] = torch.stack(prior_vars, dim=1) if prior_vars else empty
         return out
+
+    def forward_with_prior(self, inputs: torch.Tensor
+                           ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+        """(mean, sigma) (B, T, out) of the posterior, as ``forward``, and (mean, sigma) (B, T-1, out)
+        decoded by the same decoder from the one-step prior [z_{t|t-1}, log diag P_{t|t-1}],
+        t = 1..T-1: what the filter expects of frame t before seeing it. Per-step loop."""
+        trace = self.filter_steps(*self.observe(inputs), return_prior=True)
+        posterior = self.head(mean_and_log_variance(trace["z"], trace["p_diag"]))
+        prior = self.head(mean_and_log_variance(trace["z_prior"], trace["p_prior"]))
+        return posterior, prior
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)
