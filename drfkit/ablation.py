@@ -179,6 +179,29 @@ def summary_markdown(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+MECHANISM_TARGETS = ("r_follows_noise", "gain_drops", "f_predicts", "coasts")
+
+
+def mechanism_targets(summary: pd.DataFrame, min_seeds: int = 2) -> pd.DataFrame:
+    """Which of the filter's targets each DRF variant of a summary (``summarise_ablation``) meets on
+    validation, by the thresholds of claims F1 and F2: rank correlation of r with the noise, gain on
+    pure noise against clean frames, one-step prediction ratio, blackout MAE. Only variants trained at
+    the paper's max noise 0.5 (a variant trained on other noise changes what "out of distribution"
+    means) with at least ``min_seeds`` seeds. Sorted best first: most targets met, then the lowest
+    MAE at 0.75 -- the rule that chose the book's DRF (``protocols.PROTOCOLS['book']``)."""
+    from drfkit.claims import F1_GAIN_RATIO, F1_PREDICTION_RATIO, F1_RANK_CORRELATION, F2_BLACKOUT_MAE
+
+    rows = summary[(summary["kind"] == "drf") & (summary["n_seeds"] >= min_seeds)]
+    rows = rows[[variant_spec(v)["train_max_noise"] == 0.5 for v in rows["variant"]]].copy()
+    rows["r_follows_noise"] = rows["r_noise_spearman"] >= F1_RANK_CORRELATION
+    rows["gain_drops"] = rows["gain_ratio_blackout"] <= F1_GAIN_RATIO
+    rows["f_predicts"] = rows["prior_ratio"] < F1_PREDICTION_RATIO
+    rows["coasts"] = rows["mae_blackout"] <= F2_BLACKOUT_MAE
+    rows["targets_met"] = rows[list(MECHANISM_TARGETS)].sum(axis=1)
+    cols = ["variant", "n_seeds", *MECHANISM_TARGETS, "targets_met", "mae_0.5", "mae_0.75", "mae_blackout"]
+    return rows.sort_values(["targets_met", "mae_0.75"], ascending=[False, True])[cols].reset_index(drop=True)
+
+
 def round2_reading(summary: pd.DataFrame) -> str:
     """What the second round's summary (``summarise_ablation``) says, in sentences written from
     its numbers: per model kind the variant with the lowest validation MAE at the training noise,

@@ -2,7 +2,7 @@
 against the true-physics bound?
 
 The book's protocol of each model kind (``drfkit.protocols.regime_variant``) is trained at
-several max noise levels on the ablation's budget (``drfkit.ablation.train_variant``: the same
+several max noise levels on the second ablation round's budget (``drfkit.ablation.train_variant``: the same
 data seeds, schedule and validation judgement as the ablation), then evaluated on a TEST split
 of its own (seed ``DATA_SEED + 2``, never read by training or selection) along the whole sweep
 of max noise and on a blackout set (the test split at max noise 0.5 with ``blackout_frames``
@@ -155,11 +155,12 @@ def regime_summary(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def profile_map(P, progress: bool = False) -> pd.DataFrame:
-    """``regime_map`` with a profile's settings (``regime_*``, ``ablation_budget``, the sweep,
+    """``regime_map`` with a profile's settings (``regime_*``, the budget of the ablation round that chose
+    the book's protocol, ``ablation_round2_budget``, the sweep,
     ``n_samples``, ``bound_particles``); rows under ``results/<profile>/ablation``."""
     from drfkit.paths import predictions_dir, results_dir
 
-    return regime_map(P.regime_train_noise, P.regime_seeds, P.ablation_budget, results_dir(P.profile, "ablation"),
+    return regime_map(P.regime_train_noise, P.regime_seeds, P.ablation_round2_budget, results_dir(P.profile, "ablation"),
                       P.pend_sweep_max_noise, P.regime_test_sequences, P.n_samples, P.bound_particles,
                       cache=predictions_dir(P.profile), progress=progress)
 

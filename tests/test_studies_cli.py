@@ -125,3 +125,28 @@ def test_a_study_takes_its_own_noise_kind_or_a_level(tiny_profile):
     assert studies.study_noise(P, "pedestrians", Noise("salt_and_pepper", 0.05)).level == 0.05
     with pytest.raises(ValueError, match="takes salt_and_pepper noise"):
         studies.study_noise(P, "pedestrians", Noise("rkn_uniform", 0.05))
+
+
+def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, monkeypatch):
+    """The studies layer gives a book-protocol run the variant's training recipe (objective, schedule,
+    windows, selection) on the profile's schedule, and new noise on the same clean frames every epoch,
+    seeded by the epoch alone; a protocol without a recipe keeps the model's loss and one draw."""
+    import numpy as np
+
+    from drfkit import protocols
+
+    monkeypatch.setitem(protocols.PROTOCOLS, "book", {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout",
+                                                      "lstm": "fit_lstm_blackout"})
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
+    cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
+    assert (cfg.objective, cfg.beta, cfg.lr_schedule, cfg.window, cfg.select_on, cfg.prior_weight) == \
+        ("beta_nll", 1.0, "cosine", 25, "l1", 1.0)
+    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pend_book_epochs, P.pend_book_lr, P.pend_book_batch_size)
+    assert studies.train_config(P, "pendulum", "lstm", 0, "book").prior_weight == 0.0
+    assert studies.train_config(P, "pendulum", "drf", 0, "paper").objective == "model"
+    fresh = studies.fresh_training(P, "book")
+    a, b, a2 = fresh(0), fresh(1), fresh(0)
+    assert not np.array_equal(a.inputs.numpy(), b.inputs.numpy()) and np.array_equal(a.inputs.numpy(), a2.inputs.numpy())
+    assert np.array_equal(a.targets.numpy(), studies.pendulum_data(P, "train", protocol="book").targets.numpy())
+    assert studies.fresh_training(P, "paper") is None
+    assert studies._pendulum_data_key(P, "book")["fresh_noise"] is True and "fresh_noise" not in studies._pendulum_data_key(P)
