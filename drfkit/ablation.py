@@ -33,7 +33,7 @@ from drfkit.dynamics import BLACKOUT_SEED_OFFSET  # the profile's seed offsets: 
 from drfkit.io import atomic_write_json, param_hash
 from drfkit.paths import results_root
 from drfkit.protocols import ABLATION_BUDGETS as BUDGETS
-from drfkit.protocols import VARIANTS, variant_spec
+from drfkit.protocols import VARIANTS, summarise_ablation, variant_spec
 from drfkit.studies import TRAINING_BLACKOUT_SEED_OFFSET
 from drfkit.train import SequenceData, TrainConfig, load_checkpoint, train_model
 
@@ -148,18 +148,6 @@ def ablation_table(budget_name: str = "small", out: str | Path | None = None) ->
     rows = [json.loads(p.read_text()) for p in sorted(folder.glob("*-seed*.json"))]
     frame = pd.DataFrame(rows)
     return frame.drop(columns=["mae_per_frame_blackout", "key"], errors="ignore")
-
-
-SUMMARY_COLUMNS = ("mae_0.5", "mae_0.75", "mae_1", "mae_blackout", "mae_after_blackout", "r_noise_spearman",
-                   "gain_ratio_blackout", "prior_ratio", "spectral_radius_median", "best_epoch")
-
-
-def summarise_ablation(table: pd.DataFrame) -> pd.DataFrame:
-    """Mean over seeds per variant (and the number of seeds), sorted by the blackout MAE."""
-    cols = [c for c in SUMMARY_COLUMNS if c in table]
-    grouped = table.groupby(["variant", "kind"])
-    return (grouped[cols].mean().join(grouped.size().rename("n_seeds"))
-            .sort_values("mae_blackout").round(4).reset_index())
 
 
 MARKDOWN_COLUMNS = {"variant": "variant", "kind": "model", "n_seeds": "seeds", "mae_0.5": "MAE 0.5",

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from drfkit import paper
 from drfkit.io import atomic_write_csv, atomic_write_text
 from drfkit.paths import results_dir
 
@@ -32,6 +33,13 @@ SATURATED_PICP = 0.995
 # always dropping out, so PICP near always-dropout (or near random gating) follows from the
 # fraction itself, not from the Kalman gain.
 GATE_FRACTION_RANGE = (0.10, 0.90)
+# Notebook 04's two targets of the book (not claims of the paper; C6 judges the paper's 2.93x):
+# DRF's S-sample prediction at least 3x faster per frame than Monoloco as published at batch 1,
+# because the paper's claim is "~3x faster" and the book's DRF should meet that round figure itself.
+TIMING_SPEEDUP_TARGET = 3.0
+# ... and at most 1.25x DRF's own deterministic pass, because only the decoder is sampled, in one
+# batched call, so the S samples should add at most a quarter to the features' cost.
+SAMPLING_OVERHEAD_TARGET = 1.25
 # A value exactly at a threshold is inside it; this absorbs the rounding of e.g. (2.2 - 2.0) / 2.0.
 _EPS = 1e-9
 
@@ -138,7 +146,8 @@ def c1_pendulum_mae_ordering(mae: pd.DataFrame, levels=(0.5, 0.75), by_seed: pd.
                     f"no_dyn {_fmt(mae, 'no_dynamics', 'mae', 3, noise=lv)}")
     verdict = REPRODUCED if all(beyond) else PARTLY if any(full) or all(drf_best) else NOT
     return {"id": "C1", "claim": "Pendulum MAE: DRF < LSTM < no_dynamics at max noise 0.5 and 0.75",
-            "paper": "@0.5: 0.0046 < 0.0328 < 0.0465; @0.75: 0.0427 < 0.0674 < 0.1003",
+            "paper": "; ".join(f"@{lv:g}: " + " < ".join(f"{row[k]:.4f}" for k in ("drf", "lstm", "no_dynamics"))
+                               for lv, row in paper.PENDULUM_MAE.items()),
             "ours": "; ".join(ours),
             "rule": "reproduced: at every level each step of the ordering holds beyond the seeds' 95 % interval "
                     "of the paired MAE difference (seeds differ in initialisation only, so a gap inside that "
@@ -180,7 +189,8 @@ def c2_pendulum_picp_mpiw(curve: pd.DataFrame, levels=(0.5, 0.75)) -> dict[str, 
         ours += ("; " if ours else "") + "not informative (every PICP >= " + f"{100 * SATURATED_PICP:g}%): " \
             + ", ".join(saturated)
     return {"id": "C2", "claim": "Pendulum: DRF's PICP–MPIW curve dominates no_dynamics and LSTM",
-            "paper": "DRF (1.44, 97.5%) (2.18, 98.7%) (2.87, 99.2%) above both baselines",
+            "paper": "DRF " + " ".join(f"({m:.2f}, {p:g}%)" for m, p in paper.PENDULUM_PICP_MPIW["drf"])
+                     + " above both baselines",
             "ours": "share of DRF points above the baseline curve: " + ours,
             "rule": "reproduced: every DRF point (dropout rates) lies above every baseline curve at equal MPIW at "
                     "every level; partly: on average at least half do; else not reproduced; a comparison where "
@@ -218,7 +228,8 @@ def c3_pedestrian_ood_gain(by_seed: pd.DataFrame, ood_levels=(0.025, 0.05)) -> d
                      for b, g in gains.items())
     return {"id": "C3", "claim": "Pedestrians, out of distribution (p 0.025, 0.05): DRF's MAE improves on "
                                  "no_dynamics, LSTM and Monoloco",
-            "paper": "18 %, 8 %, 4 % lower MAE", "ours": ours,
+            "paper": ", ".join(f"{100 * v:.0f} %" for v in paper.PEDESTRIAN_OOD_IMPROVEMENT.values()) + " lower MAE",
+            "ours": ours,
             "rule": "improvement = 1 - MAE_DRF/MAE_base per seed (paired by seed), averaged over the OOD levels; "
                     "mean over seeds with a 95 % t-interval; reproduced: the interval is above 0 against all "
                     "three; partly: the mean is above 0 against at least one; else not reproduced",
@@ -235,7 +246,7 @@ def c4_in_distribution_parity(mae: pd.DataFrame, noise: float = 0.01) -> dict[st
     verdict = (REPRODUCED if _at_most(abs(rel), PARITY_BAND) else BETTER if rel < 0
                else PARTLY if _at_most(rel, 0.25) else NOT)
     return {"id": "C4", "claim": "Pedestrians in distribution (p 0.01): DRF comparable to Monoloco",
-            "paper": "2.56 m vs 2.56 m",
+            "paper": f"{paper.PEDESTRIAN_MAE[0.01]['drf']:.2f} m vs {paper.PEDESTRIAN_MAE[0.01]['monoloco']:.2f} m",
             "ours": f"DRF {_fmt(mae, 'drf', 'mae', 3, noise=noise)} m vs Monoloco "
                     f"{_fmt(mae, 'monoloco', 'mae', 3, noise=noise)} m ({100 * (d - m) / m:+.1f}%)",
             "rule": "comparable = within 10 % either way (the paper reports equal MAE; 10 % is the book's band: "
@@ -283,15 +294,16 @@ def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, f
 
 
 # ------------------------------------------------------------------------------ C6
-def c6_speedup(speedup: float, target: float = 2.93) -> dict[str, Any]:
+def c6_speedup(speedup: float, target: float = paper.TIMING_SPEEDUP) -> dict[str, Any]:
     verdict = REPRODUCED if _at_most(2.5, speedup) else PARTLY if _at_most(1.5, speedup) else NOT
     return {"id": "C6", "claim": "DRF computes aleatoric + epistemic uncertainty ~3x faster than Monoloco "
                                  "(25 passes, after keypoint extraction)",
-            "paper": f"36.1 ms vs 12.3 ms, {target}x (GTX 1080)", "ours": f"{speedup:.2f}x at batch 1",
+            "paper": f"{paper.TIMING_MS['monoloco']} ms vs {paper.TIMING_MS['drf']} ms, {target}x (GTX 1080)",
+            "ours": f"{speedup:.2f}x at batch 1",
             "rule": "speed-up = Monoloco as published (25 sequential passes) / DRF (25 batched decoder samples), "
                     "per frame at batch 1, measured in one run; reproduced: >= 2.5x (within 15 % of the paper's "
-                    "2.93x, about the spread of such timings across machines); partly: >= 1.5x (still clearly "
-                    "faster); else not reproduced",
+                    f"{paper.TIMING_SPEEDUP}x, about the spread of such timings across machines); partly: >= 1.5x "
+                    "(still clearly faster); else not reproduced",
             "verdict": verdict}
 
 
@@ -304,6 +316,15 @@ def _gating_ours(table: pd.DataFrame, study: str) -> tuple[pd.Series, pd.Series,
     if "fraction" in table.columns:
         ours += f"; KG gates {100 * float(kg['fraction']):.0f}% of frames"
     return kg, rnd, always, ours
+
+
+def _paper_gating(study: str) -> str:
+    """The paper's gating row of ``study`` as the claims table quotes it (``paper.GATING``)."""
+    g = paper.GATING[study]  # setting -> (PICP %, MPIW, time ms)
+    if study == "pendulum":
+        return (f"{g['kalman_gain'][0]:.1f} % vs {g['always'][0]:.1f} % (always) at {g['kalman_gain'][2]:.1f} vs "
+                f"{g['always'][2]:.1f} ms; random {g['random'][0]:.1f} %")
+    return f"{g['kalman_gain'][0]:.1f} % (KG) vs {g['random'][0]:.1f} % (random)"
 
 
 def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = None) -> dict[str, Any]:
@@ -326,7 +347,7 @@ def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = 
         score = int(close) + int(cheaper) + int(beats_random)
         verdict = NOT_TESTABLE if degenerate else REPRODUCED if score == 3 else PARTLY if score == 2 else NOT
         return {"id": "C7a", "claim": "Pendulum: Kalman-gain gating keeps PICP near always-dropout at much less time",
-                "paper": "92.1 % vs 92.9 % (always) at 16.8 vs 28.2 ms; random 86.3 %", "ours": ours,
+                "paper": _paper_gating("pendulum"), "ours": ours,
                 "rule": tuned + "three tests: PICP within 1.5 points of always-dropout (about twice the paper's own "
                         "0.8-point gap); time <= 0.75 x always (a saving of at least a quarter; the paper's is 40 %); "
                         "PICP above random gating at equal fraction; reproduced: all three; partly: two; else not "
@@ -337,7 +358,7 @@ def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = 
     verdict = (NOT_TESTABLE if degenerate else REPRODUCED if _at_most(abs(gain), 0.01)
                else PARTLY if _at_most(abs(gain), 0.03) else NOT)
     return {"id": "C7b", "claim": "Pedestrians: Kalman-gain gating brings no clear gain over random gating",
-            "paper": "87.7 % (KG) vs 87.4 % (random)", "ours": ours + f"; KG - random = {100 * gain:+.1f} pt",
+            "paper": _paper_gating("pedestrians"), "ours": ours + f"; KG - random = {100 * gain:+.1f} pt",
             "rule": tuned + "reproduced: |PICP_KG - PICP_random| <= 1 point (no gain, as the paper found: its gap "
                     "is 0.3 points); partly: <= 3 points; else not reproduced; not testable when the gate selects "
                     "under 10 % or over 90 % of the frames",

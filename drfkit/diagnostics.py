@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from drfkit.gating import rank_correlation
+from drfkit.metrics import rank_correlation
 from drfkit.models.parts import mean_and_log_variance
 
 CLEAN_LEVEL = 0.0      # a frame with noise level <= this is clean

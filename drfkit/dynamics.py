@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from drfkit.params import for_command
     from drfkit.protocols import PROTOCOLS
-    from drfkit.runtime import setup
+    from drfkit.device import setup
     from drfkit.train import load_checkpoint, load_latest
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])

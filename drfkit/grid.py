@@ -10,7 +10,7 @@ cores // the threads of one run); an address (``tcp://...``) connects to a runni
 the client's results folder at the same path (a shared file system).
 
 A task is the sequential command's own call, ``train_models(P, study, kinds=[kind], seeds=[seed])``,
-after ``drfkit.runtime.setup(threads, ...)`` as ``python -m drfkit.studies`` does: the same
+after ``drfkit.device.setup(threads, ...)`` as ``python -m drfkit.studies`` does: the same
 checkpoint files, the same OS lock per checkpoint stem, the same resume, so a run's numbers equal a
 sequential run's with the same thread count. Dask only decides where and when each run trains.
 
@@ -127,7 +127,7 @@ def train_run(train_models: Callable, notebook: str, values: dict[str, Any], run
               results_root: str) -> dict[str, Any]:
     """The task: one run, exactly as the sequential ``python -m drfkit.studies`` trains it
     (``train_models``: ``drfkit.studies.train_models``; ``notebook``: the study's training notebook)."""
-    from drfkit.runtime import setup
+    from drfkit.device import setup
 
     previous = os.environ.get("DRF_RESULTS")
     os.environ["DRF_RESULTS"] = results_root  # the client's results folder (shared, same path)

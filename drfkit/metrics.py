@@ -24,12 +24,13 @@ import math
 from statistics import NormalDist
 
 import numpy as np
+import pandas as pd
 import torch
 
 __all__ = [
     "normal_cdf", "normal_ppf", "gaussian_interval", "mae", "picp", "mpiw", "gaussian_nll",
     "crps_gaussian", "interval_score", "calibration_curve", "calibration_error",
-    "DEFAULT_CALIBRATION_LEVELS",
+    "DEFAULT_CALIBRATION_LEVELS", "rank_correlation",
 ]
 
 # 0.05, 0.10, ..., 0.95 (19 levels)
@@ -247,3 +248,14 @@ def calibration_error(y, mu, sigma, levels=None, mask=None) -> float:
     """
     expected, observed = calibration_curve(y, mu, sigma, levels=levels, mask=mask)
     return float(np.mean((observed - expected) ** 2))
+
+
+def rank_correlation(x, y) -> float:
+    """Spearman's rank correlation of two 1-D arrays (average ranks for ties); NaN if either is constant."""
+    x, y = np.asarray(x, dtype=np.float64).reshape(-1), np.asarray(y, dtype=np.float64).reshape(-1)
+    if x.shape != y.shape or x.size < 2:
+        raise ValueError(f"need two 1-D arrays of one length >= 2, got {x.shape} and {y.shape}")
+    rx, ry = pd.Series(x).rank().to_numpy(), pd.Series(y).rank().to_numpy()
+    if rx.std() == 0 or ry.std() == 0:
+        return math.nan
+    return float(np.corrcoef(rx, ry)[0, 1])

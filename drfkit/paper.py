@@ -61,7 +61,3 @@ GATING = {
 
 # Text, pedestrian section: out-of-distribution MAE improvement of DRF over each baseline.
 PEDESTRIAN_OOD_IMPROVEMENT = {"no_dynamics": 0.18, "lstm": 0.08, "monoloco": 0.04}
-
-MODEL_LABELS = {"no_dynamics": "No dynamics", "lstm": "LSTM", "monoloco": "Monoloco", "drf": "DRF (ours)",
-                "physics_bound": "true-physics bound"}
-MODEL_COLORS = {"no_dynamics": "tab:red", "lstm": "tab:green", "monoloco": "tab:orange", "drf": "tab:blue"}

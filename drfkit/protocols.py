@@ -19,7 +19,10 @@ Every variant stays listed, whether it helped or not: the ablation table shows t
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 BLACKOUT_TRAINING = {"fraction": 0.5, "lengths": (5, 20)}
 BOOK_DRF = {"transition_kind": "basis", "memory_dims": 15, "noise_head": "log"}
@@ -138,3 +141,17 @@ def protocol_spec(protocol: str, kind: str) -> dict[str, Any]:
     if kind not in PROTOCOLS[protocol]:
         raise ValueError(f"protocol {protocol!r} has no {kind!r} model; it trains {sorted(PROTOCOLS[protocol])}")
     return variant_spec(PROTOCOLS[protocol][kind])
+
+
+# the ablation's rows (``drfkit.ablation.ablation_table``) summarised: here, below the ablation, so that
+# the report reads the summary without importing the ablation's training machinery
+SUMMARY_COLUMNS = ("mae_0.5", "mae_0.75", "mae_1", "mae_blackout", "mae_after_blackout", "r_noise_spearman",
+                   "gain_ratio_blackout", "prior_ratio", "spectral_radius_median", "best_epoch")
+
+
+def summarise_ablation(table: pd.DataFrame) -> pd.DataFrame:
+    """Mean over seeds per variant (and the number of seeds), sorted by the blackout MAE."""
+    cols = [c for c in SUMMARY_COLUMNS if c in table]
+    grouped = table.groupby(["variant", "kind"])
+    return (grouped[cols].mean().join(grouped.size().rename("n_seeds"))
+            .sort_values("mae_blackout").round(4).reset_index())

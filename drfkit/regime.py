@@ -196,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
 def write_outputs(P, table: pd.DataFrame) -> pd.DataFrame:
     """tables/pendulum_regime_map.csv, tables/pendulum_regime_summary.csv and
     figures/pendulum_regime_map.png of a profile; returns the summary."""
-    from drfkit.report import plot_regime, save_figure, save_table
+    from drfkit.figures import plot_regime
+    from drfkit.report import save_figure, save_table
 
     summary = regime_summary(table)
     save_table(P.profile, "pendulum_regime_map", table)

@@ -21,7 +21,7 @@ from drfkit.data.noise import Noise
 from drfkit.io import atomic_write_csv, param_hash
 from drfkit.paths import data_dir, models_dir, tables_dir
 from drfkit.protocols import PROTOCOLS, protocol_spec
-from drfkit.runtime import pick_device
+from drfkit.device import pick_device
 from drfkit.train import SequenceData, TrainConfig, TrainResult, history_frame, naming_fields, train_model
 
 SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
@@ -284,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
     from drfkit.io import CorruptArtefactError, LockedError
     from drfkit.params import ParameterError, for_notebook, load_profile, parse_overrides
     from drfkit.train import ResumeMismatchError
-    from drfkit.runtime import setup
+    from drfkit.device import setup
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")

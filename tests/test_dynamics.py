@@ -15,7 +15,7 @@ from drfkit.filter import kalman_predict, kalman_update
 from drfkit.models import build_model, default_config
 from drfkit.models.basis import BasisTransition
 from drfkit.models.parts import LOG_R_RANGE
-from drfkit.models.sequence import MEMORY_VARIANCE
+from drfkit.models.drf import MEMORY_VARIANCE
 
 torch.set_num_threads(1)
 

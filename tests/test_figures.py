@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 
-from drfkit import report  # noqa: E402
+from drfkit import figures  # noqa: E402
 
 PEND = ["drf", "no_dynamics", "lstm"]
 PED = ["drf", "no_dynamics", "lstm", "monoloco"]
@@ -101,18 +101,18 @@ def _history(models, selected_on_l1=(), epochs=30):
 
 
 FIGURES = {
-    "mae_bars": lambda: report.plot_mae_bars(_sweep_summary(PEND, [0.5, 0.75], "pendulum"), PEND,
-                                             {0.5: {"drf": 0.02}}, ylabel="MAE (cos θ, sin θ)",
-                                             level_name="max noise", bound={0.5: 0.01}),
-    "picp_mpiw": lambda: report.plot_picp_mpiw(_picp_curves(PEND, [0.5, 0.75]), PEND,
-                                               {"drf": [(1.0, 97.0), (2.0, 99.0)]}, level_name="max noise"),
-    "sweep": lambda: report.plot_sweep(_sweep_summary(PED, [0.0, 0.01, 0.05], "pedestrians"), PED, 0.01,
-                                       metrics=("mae", "picp", "nll"), xlabel="salt-and-pepper p"),
-    "calibration": lambda: report.plot_calibration(_calibration_points("pendulum", [0.5, 0.75], PEND), PEND),
-    "blackout": lambda: report.plot_blackout(_blackout_curves(), (4, 8), ["drf", "no_dynamics", "physics_bound"]),
-    "regime": lambda: report.plot_regime(_regime_table(), PEND),
-    "training_curves": lambda: report.plot_training_curves(_history(PEND)),
-    "training_curves_l1": lambda: report.plot_training_curves(_history(PED, selected_on_l1=("monoloco",))),
+    "mae_bars": lambda: figures.plot_mae_bars(_sweep_summary(PEND, [0.5, 0.75], "pendulum"), PEND,
+                                              {0.5: {"drf": 0.02}}, ylabel="MAE (cos θ, sin θ)",
+                                              level_name="max noise", bound={0.5: 0.01}),
+    "picp_mpiw": lambda: figures.plot_picp_mpiw(_picp_curves(PEND, [0.5, 0.75]), PEND,
+                                                {"drf": [(1.0, 97.0), (2.0, 99.0)]}, level_name="max noise"),
+    "sweep": lambda: figures.plot_sweep(_sweep_summary(PED, [0.0, 0.01, 0.05], "pedestrians"), PED, 0.01,
+                                        metrics=("mae", "picp", "nll"), xlabel="salt-and-pepper p"),
+    "calibration": lambda: figures.plot_calibration(_calibration_points("pendulum", [0.5, 0.75], PEND), PEND),
+    "blackout": lambda: figures.plot_blackout(_blackout_curves(), (4, 8), ["drf", "no_dynamics", "physics_bound"]),
+    "regime": lambda: figures.plot_regime(_regime_table(), PEND),
+    "training_curves": lambda: figures.plot_training_curves(_history(PEND)),
+    "training_curves_l1": lambda: figures.plot_training_curves(_history(PED, selected_on_l1=("monoloco",))),
 }
 # what the notebooks' stored outputs show: a figure keeps its size and number of axes
 SHAPES = {"mae_bars": (6.0, 3.4, 1), "picp_mpiw": (9.0, 3.4, 2), "sweep": (13.5, 3.4, 3), "calibration": (7.2, 3.4, 2),
@@ -150,15 +150,15 @@ def test_every_panel_has_axis_labels_and_a_legend_where_it_draws_several_series(
 
 
 def test_units_and_noise_parameter_on_the_axes():
-    pend = report.plot_picp_mpiw(_picp_curves(PEND, [0.5]), PEND, level_name="max noise")
+    pend = figures.plot_picp_mpiw(_picp_curves(PEND, [0.5]), PEND, level_name="max noise")
     assert "(cos θ, sin θ)" in pend.axes[0].get_xlabel() and "max noise" in pend.axes[0].get_title()
-    ped = report.plot_picp_mpiw(_picp_curves(PED, [0.01]), PED, level_name="p")
+    ped = figures.plot_picp_mpiw(_picp_curves(PED, [0.01]), PED, level_name="p")
     assert "(m)" in ped.axes[0].get_xlabel()
     assert "salt-and-pepper p" in ped.axes[0].get_title()  # "p" alone reads as a dropout rate here
-    sweep = report.plot_sweep(_sweep_summary(PED, [0.0, 0.05], "pedestrians"), PED, 0.01, xlabel="salt-and-pepper p")
+    sweep = figures.plot_sweep(_sweep_summary(PED, [0.0, 0.05], "pedestrians"), PED, 0.01, xlabel="salt-and-pepper p")
     assert "(m)" in sweep.axes[0].get_ylabel() and "salt-and-pepper p" in sweep.axes[0].get_xlabel()
-    bars = report.plot_mae_bars(_sweep_summary(PED, [0.01], "pedestrians"), PED, ylabel="depth MAE (m)",
-                                level_name="p", width=5)
+    bars = figures.plot_mae_bars(_sweep_summary(PED, [0.01], "pedestrians"), PED, ylabel="depth MAE (m)",
+                                 level_name="p", width=5)
     assert "salt-and-pepper p" in bars.axes[0].get_xlabel()
 
 
@@ -187,7 +187,7 @@ def test_picp_points_carry_their_dropout_rate():
 def test_sweep_picp_panel_has_the_nominal_line_a_clipped_band_and_explained_lines():
     summary = _sweep_summary(PED, [0.0, 0.01, 0.05], "pedestrians")
     summary["picp_hi"] = summary["picp"] + summary["picp_ci"]  # a table written before summarise clipped its ends
-    fig = report.plot_sweep(summary, PED, 0.01, metrics=("mae", "picp", "nll"), xlabel="salt-and-pepper p")
+    fig = figures.plot_sweep(summary, PED, 0.01, metrics=("mae", "picp", "nll"), xlabel="salt-and-pepper p")
     picp = next(ax for ax in fig.axes if "PICP" in ax.get_ylabel())
     assert _hline_at(picp, 95.0) and 0 <= picp.get_ylim()[0] and picp.get_ylim()[1] <= 102
     for band in picp.collections:
@@ -198,9 +198,9 @@ def test_sweep_picp_panel_has_the_nominal_line_a_clipped_band_and_explained_line
 
 
 def test_calibration_titles_name_the_noise_parameter():
-    pend = report.plot_calibration(_calibration_points("pendulum", [0.5, 0.75], PEND), PEND)
+    pend = figures.plot_calibration(_calibration_points("pendulum", [0.5, 0.75], PEND), PEND)
     assert [ax.get_title() for ax in pend.axes] == ["max noise 0.5", "max noise 0.75"]
-    ped = report.plot_calibration(_calibration_points("pedestrians", [0.01, 0.05], PED), PED)
+    ped = figures.plot_calibration(_calibration_points("pedestrians", [0.01, 0.05], PED), PED)
     assert [ax.get_title() for ax in ped.axes] == ["salt-and-pepper p 0.01", "salt-and-pepper p 0.05"]
     assert all(any("perfect calibration" in t for t in _legend_texts(ax)) for ax in pend.axes)
 
@@ -217,7 +217,7 @@ def test_regime_map_explains_the_training_noise_line_and_labels_every_panel():
 def test_training_curves_mark_each_runs_best_epoch_and_show_the_selection_region(selected_on_l1):
     models = PED if selected_on_l1 else PEND
     curves = _history(models, selected_on_l1)
-    fig = report.plot_training_curves(curves)
+    fig = figures.plot_training_curves(curves)
     val = fig.axes[1] if not selected_on_l1 else None
     stars = [(x, y) for ax in fig.axes for line in ax.get_lines() if line.get_marker() == "*"
              for x, y in zip(line.get_xdata(), line.get_ydata())]

@@ -1,6 +1,6 @@
-"""Tests for drfkit.gating: the competency score, random gating, threshold choice on
-validation data only, and gated inference (MC dropout on selected frames, deterministic
-elsewhere) against the no-dropout and always-dropout results."""
+"""Tests for drfkit.gating and drfkit.gating_study: the competency score, random gating,
+threshold choice on validation data only, and gated inference (MC dropout on selected frames,
+deterministic elsewhere) against the no-dropout and always-dropout results."""
 from __future__ import annotations
 
 import inspect
@@ -12,7 +12,8 @@ import pytest
 import torch
 
 import drfkit.models.parts as parts
-from drfkit import gating
+from drfkit import gating, gating_study
+from drfkit.metrics import rank_correlation
 from drfkit.models import build_model, default_config
 from drfkit.train import SequenceData
 
@@ -72,9 +73,9 @@ def test_score_from_a_real_filter_is_per_frame_and_first_gain_is_identity():
 
 def test_rank_correlation_and_direction_known_answers():
     x = np.arange(20.0)
-    assert gating.rank_correlation(x, x ** 3) == pytest.approx(1.0)
-    assert gating.rank_correlation(x, -np.exp(x)) == pytest.approx(-1.0)
-    assert math.isnan(gating.rank_correlation(x, np.ones(20)))
+    assert rank_correlation(x, x ** 3) == pytest.approx(1.0)
+    assert rank_correlation(x, -np.exp(x)) == pytest.approx(-1.0)
+    assert math.isnan(rank_correlation(x, np.ones(20)))
     assert gating.choose_direction(x, x ** 2) == (1, pytest.approx(1.0))
     assert gating.choose_direction(x, -x)[0] == -1
     assert gating.choose_direction(x, np.ones(20))[0] == gating.DEFAULT_DIRECTION
@@ -167,8 +168,8 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
     monkeypatch.setattr(studies, "pedestrian_data", fake_data)
     P = SimpleNamespace(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
                         gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95)
-    out = gating.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
-                              min_run_time=0.001)
+    out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
+                                    min_run_time=0.001)
     assert served == [("val", 0.05), ("test", 0.05)]
     assert [kind for kind, _ in recorded] == ["direction", "threshold"]
     for _, args in recorded:
@@ -262,7 +263,7 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
     gate, val_table = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
     assert gate.direction in (1, -1) and len(gate.sweep_thresholds) == 4
     assert val_table["chosen"].sum() == 1
-    table, sweep = gating.sweep_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001)
+    table, sweep = gating_study.sweep_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001)
     assert list(table["setting"]) == ["no_dropout", "always", "kalman_gain", "random"]
     by = table.set_index("setting")
     assert by.loc["no_dropout", "fraction"] == 0 and by.loc["always", "fraction"] == 1
@@ -286,24 +287,24 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
 
 def test_timing_subset_is_evenly_spaced_fixed_and_checked():
     lengths = torch.full((10,), 5)
-    assert gating.timing_subset(lengths, 0).tolist() == list(range(10))
-    assert gating.timing_subset(lengths, 50).tolist() == list(range(10))
-    idx = gating.timing_subset(torch.full((1000,), 75), 7500)  # the paper's pendulum: 100 sequences
+    assert gating_study.timing_subset(lengths, 0).tolist() == list(range(10))
+    assert gating_study.timing_subset(lengths, 50).tolist() == list(range(10))
+    idx = gating_study.timing_subset(torch.full((1000,), 75), 7500)  # the paper's pendulum: 100 sequences
     assert idx.numel() == 100 and idx[0] == 0 and idx[-1] == 999 and bool((idx.diff() > 0).all())
-    assert torch.equal(idx, gating.timing_subset(torch.full((1000,), 75), 7500))
-    assert gating.timing_subset(torch.tensor([1, 2, 3, 4]), 5).numel() == 2  # ceil(4 * 5 / 10)
+    assert torch.equal(idx, gating_study.timing_subset(torch.full((1000,), 75), 7500))
+    assert gating_study.timing_subset(torch.tensor([1, 2, 3, 4]), 5).numel() == 2  # ceil(4 * 5 / 10)
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="gating_timing_frames"):
-            gating.timing_subset(lengths, bad)
+            gating_study.timing_subset(lengths, bad)
 
 
 def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(monkeypatch):
     model, val, test = tiny_drf(), keypoint_data(seed=1), keypoint_data(seed=2)
     gate, _ = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
-    thresholds = gating.sweep_thresholds(gate)
-    full = gating.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
-                                thresholds=thresholds)
-    idx = gating.timing_subset(test.mask.sum(dim=1), 12)  # ceil(6 * 12 / 27) = 3: sequences 0, 2, 5
+    thresholds = gating_study.sweep_thresholds(gate)
+    full = gating_study.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                                      thresholds=thresholds)
+    idx = gating_study.timing_subset(test.mask.sum(dim=1), 12)  # ceil(6 * 12 / 27) = 3: sequences 0, 2, 5
     assert idx.tolist() == [0, 2, 5]
     subset_mask = test.mask[idx]
     feature_batches, stage_calls = [], []
@@ -318,9 +319,10 @@ def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(m
         return real_stage(model_, h, gains, mask, setting, **kw)
 
     monkeypatch.setattr(model, "features", features)
-    monkeypatch.setattr(gating, "uncertainty_stage", stage_)
-    sub = gating.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
-                               thresholds=thresholds, timing_frames=12)
+    monkeypatch.setattr(gating, "uncertainty_stage", stage_)  # run_setting's stage
+    monkeypatch.setattr(gating_study, "uncertainty_stage", stage_)  # evaluate_gate's
+    sub = gating_study.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                                     thresholds=thresholds, timing_frames=12)
     # metrics: one pass over all B sequences, identical to the untimed-subset run
     metrics = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae"]
     assert sub[metrics].equals(full[metrics])
@@ -349,11 +351,11 @@ def test_selected_fraction_of_never_and_always_gates():
     gate, _ = gating.fit_gate(model, data, n_samples=4, tolerance=0.0, n_points=3)
     for threshold, expected in ((gating.NEVER, 0.0), (gating.ALWAYS, 1.0)):
         g = gating.Gate(**{**gate.__dict__, "threshold": threshold})
-        assert gating.selected_fraction(model, g, data) == expected
+        assert gating_study.selected_fraction(model, g, data) == expected
 
 
 def test_paper_table_has_picp_as_fraction():
-    paper = gating.paper_table()
+    paper = gating_study.paper_table()
     assert len(paper) == 8 and set(paper["setting"]) == set(gating.SETTINGS)
     row = paper[(paper["study"] == "pendulum") & (paper["setting"] == "kalman_gain")].iloc[0]
     assert row["picp"] == pytest.approx(0.921) and row["time_ms"] == pytest.approx(16.8)
@@ -362,6 +364,6 @@ def test_paper_table_has_picp_as_fraction():
 def test_measure_interleaved_reports_the_slower_function_as_slower():
     import time as _time
 
-    out = gating.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
-                                     min_run_time=0.01, min_rounds=3)
+    out = gating_study.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
+                                           min_run_time=0.01, min_rounds=3)
     assert out["slow"] > 0.0015 and out["fast"] < out["slow"]

@@ -1,4 +1,4 @@
-"""The real-data path (drfkit.data.nuscenes) on a tiny fixture in the official nuScenes schema.
+"""The real-data path (drfkit.data.nuscenes, nuscenes_tables, pifpaf) on a tiny fixture in the official nuScenes schema.
 
 The fixture (written by ``_nusc_write_fixture``) has two scenes with known poses, so the
 camera-frame box centres are known analytically:
@@ -28,21 +28,16 @@ import numpy as np
 import pytest
 
 from drfkit.data.noise import Noise
-from drfkit.data import nuscenes
-from drfkit.data.nuscenes import (
+from drfkit.data import nuscenes, nuscenes_tables
+from drfkit.data.nuscenes import load_nuscenes_records, write_noisy_images
+from drfkit.data.nuscenes_tables import (
     box_in_image_any,
-    box_iou,
     camera_images,
-    enlarge_boxes,
-    load_nuscenes_records,
-    match_boxes,
-    prediction_file_candidates,
     project_annotations,
     quaternion_to_rotation,
-    read_predictions,
     read_tables,
-    write_noisy_images,
 )
+from drfkit.data.pifpaf import box_iou, enlarge_boxes, match_boxes, prediction_file_candidates, read_predictions
 from drfkit.data.pedestrians import load_pedestrians
 from drfkit.data.sim_detector import simulate_records
 from drfkit.data.sim_world import simulate_truth
@@ -106,7 +101,7 @@ def _nusc_expected_box(cam_xyz, k_matrix):
 def _nusc_write_fixture(root: Path, *, with_images: bool = False) -> dict:
     """Write the fixture tables (and optionally tiny camera images); return helpful facts."""
     rng = np.random.default_rng(0)
-    tables = {name: [] for name in nuscenes.TABLES}
+    tables = {name: [] for name in nuscenes_tables.TABLES}
     sensors = {"CAM_FRONT": "camera", "CAM_BACK": "camera", "LIDAR_TOP": "lidar"}
     for channel, modality in sensors.items():
         tables["sensor"].append({"token": _nusc_tok("sensor", channel), "channel": channel, "modality": modality})
@@ -357,7 +352,7 @@ def test_clear_errors(fixture, tmp_path):
     with pytest.raises(ValueError, match="not valid JSON"):
         read_tables(root, VERSION)
     with pytest.raises(ValueError, match="cameras"):
-        camera_images({name: [] for name in nuscenes.TABLES}, ("CAM_SIDEWAYS",))
+        camera_images({name: [] for name in nuscenes_tables.TABLES}, ("CAM_SIDEWAYS",))
 
 
 def test_bad_prediction_files_are_rejected(fixture):

@@ -53,8 +53,9 @@ def test_the_round2_table_in_docs_is_the_rows_on_disk():
     """docs/dynamics.md quotes the second round's summary; regenerate it with
     `python -m drfkit.ablation --budget fit --out results/paper/ablation --summary --markdown`."""
     from drfkit import ablation
+    from drfkit.protocols import summarise_ablation
 
     text = (REPO_ROOT / "docs" / "dynamics.md").read_text()
     quoted = text.split("<!-- round2:start -->\n", 1)[1].split("\n<!-- round2:end -->", 1)[0].strip()
     rows = ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation")
-    assert quoted == ablation.summary_markdown(ablation.summarise_ablation(rows)).strip()
+    assert quoted == ablation.summary_markdown(summarise_ablation(rows)).strip()

@@ -11,7 +11,7 @@ import torch
 
 from drfkit import ablation, dynamics, studies
 from drfkit.params import load_profile, notebook_params, validate
-from drfkit.protocols import FIT_THE_MEAN, PROTOCOLS, VARIANTS, protocol_spec, variant_spec
+from drfkit.protocols import FIT_THE_MEAN, PROTOCOLS, VARIANTS, protocol_spec, summarise_ablation, variant_spec
 
 torch.set_num_threads(1)
 
@@ -91,7 +91,7 @@ def test_ablation_row_is_trained_once_and_reused(tmp_path):
     ablation.run_variant("no_dynamics_book", 0, "tiny", tmp_path, progress=False)
     table = ablation.ablation_table("tiny", tmp_path)
     assert set(table["variant"]) == {"book", "no_dynamics_book"} and "mae_per_frame_blackout" not in table
-    summary = ablation.summarise_ablation(table)
+    summary = summarise_ablation(table)
     assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
     assert ablation.main(["--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
 

@@ -77,7 +77,7 @@ def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
     import matplotlib
 
     matplotlib.use("Agg")
-    from drfkit.report import plot_regime
+    from drfkit.figures import plot_regime
 
     _, table = tiny_map
     fig = plot_regime(table, list(REGIME_BASES))

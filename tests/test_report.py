@@ -186,7 +186,7 @@ def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
     import matplotlib
 
     matplotlib.use("Agg")
-    from drfkit.report import plot_blackout
+    from drfkit.figures import plot_blackout
 
     frames = list(range(10))
     curve = lambda model, protocol, level: pd.DataFrame(  # noqa: E731

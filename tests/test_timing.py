@@ -375,7 +375,7 @@ def test_training_step_times_sets_model_attributes_and_rejects_unknown_ones(monk
     inputs, targets = example_frames("pedestrians", 2, 3), torch.rand(2, 3, 1) + 5.0
     calls = []
     real = recursion.drf_recursion
-    monkeypatch.setattr("drfkit.models.sequence.drf_recursion", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr("drfkit.models.drf.drf_recursion", lambda *a: calls.append(1) or real(*a))
     for attrs, one_node in (({}, True), ({"whole_sequence": False}, False)):
         calls.clear()
         speed = timing.training_step_times({"drf": config}, inputs, targets, n_batches_per_epoch=1,

@@ -1,18 +1,19 @@
 """Models of the study: DRF, its two baselines and Monoloco, behind one interface.
 
-See ``drfkit.models.sequence`` for the interface every model exposes, and
-``build_model(config)`` to rebuild a model from the ``config`` a checkpoint stores.
+See ``drfkit.models.sequence`` for the interface every model exposes (the DRF itself is
+``drfkit.models.drf``), and ``build_model(config)`` to rebuild a model from the ``config`` a
+checkpoint stores.
 """
 from __future__ import annotations
 
 import inspect
 from typing import Any
 
+from drfkit.models.drf import DeepRecursiveFilter
 from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_loss
 from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads
 from drfkit.models.recursion import TransitionNetwork
-from drfkit.models.sequence import (INPUT_KINDS, DeepRecursiveFilter, LSTMBaseline, NoDynamics,
-                                    SequenceModel, gaussian_nll)
+from drfkit.models.sequence import INPUT_KINDS, LSTMBaseline, NoDynamics, SequenceModel, gaussian_nll
 
 MODEL_CLASSES: dict[str, type[SequenceModel]] = {
     cls.kind: cls for cls in (DeepRecursiveFilter, NoDynamics, LSTMBaseline, Monoloco)

@@ -28,7 +28,8 @@ import numpy as np
 
 from drfkit import studies
 from drfkit.data.pendulum import estimate_angle
-from drfkit.report import new_figure, save_figure
+from drfkit.figures import new_figure
+from drfkit.report import save_figure
 
 # %% [markdown]
 # ## The noisy pendulum

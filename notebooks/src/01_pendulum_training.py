@@ -38,9 +38,9 @@ import torch
 
 from drfkit import studies
 from drfkit.evaluate import evaluate_study, summarise
+from drfkit.figures import color, label, new_figure, plot_mae_bars, plot_picp_mpiw, plot_training_curves
 from drfkit.paper import PENDULUM_MAE, PENDULUM_PICP_MPIW
-from drfkit.report import (color, label, new_figure, paper_comparison, plot_mae_bars, plot_picp_mpiw,
-                           plot_training_curves, epoch_times_line, recursion_scaling_line, save_figure, save_table)
+from drfkit.report import epoch_times_line, paper_comparison, recursion_scaling_line, save_figure, save_table
 
 # %% [markdown]
 # ## Training
@@ -359,7 +359,7 @@ for _, r in paper_check.iterrows():
 
 # %%
 from drfkit.data.pendulum import blackout_frames
-from drfkit.report import plot_blackout
+from drfkit.figures import plot_blackout
 
 curves_dark = pd.concat([dynamics.blackout_curves(P, models), bound_curves], ignore_index=True)
 save_table(P.profile, "pendulum_blackout_curves", curves_dark)

@@ -42,8 +42,9 @@ import pandas as pd
 
 from drfkit import studies
 from drfkit.evaluate import evaluate_study, summarise
+from drfkit.figures import label, plot_mae_bars, plot_training_curves
 from drfkit.paper import PEDESTRIAN_MAE
-from drfkit.report import label, paper_comparison, plot_mae_bars, plot_training_curves, save_figure, save_table
+from drfkit.report import paper_comparison, save_figure, save_table
 
 # %% [markdown]
 # ## How realistic is the simulated source?

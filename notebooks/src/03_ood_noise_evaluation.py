@@ -33,14 +33,15 @@ P, timer = start_notebook("03_ood_noise_evaluation", globals())
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from drfkit import claims, studies
+from drfkit import claims, registry, studies
 from drfkit.evaluate import calibration_points, evaluate_study, summarise
+from drfkit.figures import plot_calibration, plot_mae_bars, plot_picp_mpiw, plot_sweep
 from drfkit.paper import PEDESTRIAN_MAE, PEDESTRIAN_PICP_MPIW, PENDULUM_MAE, PENDULUM_PICP_MPIW
-from drfkit.report import plot_calibration, plot_mae_bars, plot_picp_mpiw, plot_sweep, save_figure, save_table
+from drfkit.report import save_figure, save_table
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-PROTOCOLS = {"pendulum": list(P.pend_protocols), "pedestrians": ["paper"]}
+PROTOCOLS = {s: registry.study(s).protocols(P) for s in P.eval_studies}  # study -> training protocols
 groups = [(s, protocol) for s in P.eval_studies for protocol in PROTOCOLS[s]]  # (study, protocol)
 models = {g: studies.trained_models(P, g[0], protocol=g[1]) for g in groups}
 levels = {"pendulum": sorted(set(P.pend_eval_max_noise) | set(P.pend_sweep_max_noise)),

@@ -65,15 +65,17 @@ import numpy as np
 import pandas as pd
 import torch
 
-from drfkit import claims, gating, studies
+from drfkit import claims, gating, registry, studies
 from drfkit.evaluate import summarise
+from drfkit.figures import new_figure
+from drfkit.gating_study import gating_study, paper_table, train_noise_gates
 from drfkit.io import atomic_write_csv
 from drfkit.measurements import cached
 from drfkit.paths import results_dir
-from drfkit.report import new_figure, save_figure, save_table
+from drfkit.report import save_figure, save_table
 
 STUDIES = tuple(P.eval_studies)  # both by default; see notebook 03
-PROTOCOLS = {"pendulum": list(P.pend_protocols), "pedestrians": ["paper"]}
+PROTOCOLS = {s: registry.study(s).protocols(P) for s in STUDIES}  # study -> training protocols
 GROUPS = [(s, protocol) for s in STUDIES for protocol in PROTOCOLS[s]]  # (study, protocol)
 # Times need a fixed thread count: `threads`, or 1 when it is 0 (torch's default uses every core,
 # and on a machine shared with other jobs oversubscribed threads make the filter's small ops
@@ -89,7 +91,7 @@ torch.set_num_threads(P.threads or 1)
 # %%
 # NBVAL_IGNORE_OUTPUT
 models = {g: studies.trained_models(P, g[0], protocol=g[1]) for g in GROUPS}
-runs = {g: cached(P.profile, gating.gating_study, P, g[0], models=models[g], timing=True) for g in GROUPS}
+runs = {g: cached(P.profile, gating_study, P, g[0], models=models[g], timing=True) for g in GROUPS}
 stack = lambda part: pd.concat([r[part].assign(protocol=g[1]) for g, r in runs.items()], ignore_index=True)  # noqa: E731
 table, sweep, validation = stack("table"), stack("sweep"), stack("validation")
 atomic_write_csv(results_dir(P.profile) / "gating.csv", table)
@@ -135,7 +137,7 @@ gates.rename(columns={"fraction": "test_fraction"}).round(4)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-in_dist = pd.concat([cached(P.profile, gating.train_noise_gates, P, study, models[(study, protocol)], timing=False)
+in_dist = pd.concat([cached(P.profile, train_noise_gates, P, study, models[(study, protocol)], timing=False)
                      .assign(protocol=protocol) for study, protocol in GROUPS], ignore_index=True)
 in_dist.insert(1, "protocol", in_dist.pop("protocol"))
 _ = save_table(P.profile, "gating_train_noise_gate", in_dist)
@@ -150,7 +152,7 @@ in_dist.round(4)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-paper = gating.paper_table().rename(columns={"picp": "paper_picp", "mpiw": "paper_mpiw", "time_ms": "paper_time_ms"})
+paper = paper_table().rename(columns={"picp": "paper_picp", "mpiw": "paper_mpiw", "time_ms": "paper_time_ms"})
 shown = summary.merge(paper, on=["study", "setting"])
 shown["picp_%"], shown["paper_picp_%"] = 100 * shown["picp"], 100 * shown["paper_picp"]
 always = shown[shown["setting"] == "always"].set_index(["study", "protocol"])
@@ -204,7 +206,7 @@ plt.show()
 # %%
 # NBVAL_IGNORE_OUTPUT
 TRAIN_NOISE = {"pendulum": P.pend_train_max_noise, "pedestrians": P.ped_train_p}
-runs_train = {g: cached(P.profile, gating.gating_study, P, g[0], models=models[g], val_noise=TRAIN_NOISE[g[0]],
+runs_train = {g: cached(P.profile, gating_study, P, g[0], models=models[g], val_noise=TRAIN_NOISE[g[0]],
                         timing=True) for g in GROUPS}
 table_train = pd.concat([r["table"].assign(protocol=g[1]) for g, r in runs_train.items()], ignore_index=True)
 summary_train = summarise(table_train, ["study", "protocol", "setting"], values)
@@ -230,7 +232,7 @@ claims_table[claims_table["id"].str.startswith("C7")][["id", "protocol", "claim"
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-reference = gating.paper_table().set_index(["study", "setting"])
+reference = paper_table().set_index(["study", "setting"])
 for study, protocol in GROUPS:
     mine = summary[(summary["study"] == study) & (summary["protocol"] == protocol)].set_index("setting")
     ours = {k: {c: float(mine.loc[k, c]) for c in ("picp", "time_ms", "head_ms", "fraction")} for k in gating.SETTINGS}

@@ -1,0 +1,204 @@
+"""The paper's Deep Recursive Filter: a Kalman filter on the learned latent state, between the
+observation heads and the decoder that it shares with the baselines (``drfkit.models.sequence``
+holds the interface every model exposes)."""
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+
+from drfkit.filter import kalman_step
+from drfkit.models.basis import BasisTransition
+from drfkit.models.parts import mean_and_log_variance
+from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
+from drfkit.models.sequence import _EncodedSequenceModel
+
+TRANSITION_KINDS = ("lstm", "basis")
+# Observation variance of a memory dimension: the gain on its own (zero) observation is
+# P / (P + MEMORY_VARIANCE) ~ 1e-4, i.e. unobserved up to a leak far below what training moves
+# (H = [I 0] in the limit). Kept finite so the filter's Cholesky path is the same for every dim.
+MEMORY_VARIANCE = 1e4
+
+
+class DeepRecursiveFilter(_EncodedSequenceModel):
+    """The paper's DRF: a Kalman filter on the learned latent state.
+
+    Per sequence: w_t, r_t from the encoder for all frames at once; then for t >= 1 the
+    transition network maps z_{t-1} to F_t, q_t and ``kalman_step`` gives z_t, P_t, K_t.
+    The decoder reads [z_t, log diag(P_t)] (P enters through its diagonal only).
+
+    Start: z_0 = w_0, P_0 = diag(r_0) -- the exact posterior after the first observation
+    under an uninformative prior, so the gain at t = 0 is reported as I.
+    The filter is causal: padding must trail a sequence's valid frames.
+    In training the loop runs as one autograd node (``drfkit.models.recursion``), at
+    inference step by step; both compute the same values (tests/test_recursion.py).
+
+    Options of the book's protocol (defaults: the paper's model):
+      ``transition_kind='basis'``  F_t from a softmax mixture of learned matrices on z_{t-1} alone
+                                   (``drfkit.models.basis``; no memory outside the filter state)
+      ``memory_dims=m``            the last m latent dims are never observed (w = 0, r =
+                                   MEMORY_VARIANCE; at t = 0 the prior z = 0, P = 1): room in
+                                   the state for what one frame cannot show, such as velocity
+      ``noise_head='log'``         r on a bounded log scale (``ObservationHeads``)
+      ``constant_q=True``          Q = diag(exp(log q)), learned, the same at every step (the LSTM
+                                   transition's; the basis transition's Q is constant already)
+
+    ``forward_with_prior`` also decodes the one-step prediction z_{t|t-1}, P_{t|t-1}, so a training
+    loss can ask the transition to predict (``TrainConfig.prior_weight``).
+    """
+
+    kind = "drf"
+    stream_follows = ("features", "run_filter", "filter_steps")
+    #: train through the one-node recursion; False differentiates the per-step loop with autograd
+    #: (same values, slower: kept for the tests and for timing the difference, not a config option)
+    whole_sequence = True
+
+    def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
+                 transition_hidden: int = 64, transition_kind: str = "lstm", n_basis: int = 16,
+                 memory_dims: int = 0, constant_q: bool = False, **kwargs: Any):
+        if isinstance(transition_hidden, bool) or not isinstance(transition_hidden, int) \
+                or transition_hidden < 1:
+            raise ValueError(f"transition_hidden must be a positive int, got {transition_hidden!r}")
+        if transition_kind not in TRANSITION_KINDS:
+            raise ValueError(f"transition_kind must be one of {TRANSITION_KINDS}, got {transition_kind!r}")
+        if isinstance(memory_dims, bool) or not isinstance(memory_dims, int) or not 0 <= memory_dims < latent:
+            raise ValueError(f"memory_dims must be an int in [0, latent = {latent}), got {memory_dims!r}")
+        if not isinstance(constant_q, bool):
+            raise ValueError(f"constant_q must be True or False, got {constant_q!r}")
+        if constant_q and transition_kind != "lstm":
+            raise ValueError(f"constant_q is an option of the LSTM transition; the {transition_kind!r} "
+                             "transition's Q is constant already")
+        extra: dict[str, Any] = {"transition_hidden": transition_hidden}
+        if transition_kind != "lstm":  # as noise_head: only what departs from the paper enters the config
+            extra |= {"transition_kind": transition_kind, "n_basis": n_basis}
+        if memory_dims:
+            extra["memory_dims"] = memory_dims
+        if constant_q:
+            extra["constant_q"] = True
+        super().__init__(input_kind, out_dim, latent, _extra_config=extra, **kwargs)
+        self.transition_kind, self.memory_dims = transition_kind, memory_dims
+        if transition_kind == "basis":
+            self.transition = BasisTransition(latent, transition_hidden, n_basis)
+        else:
+            self.transition = TransitionNetwork(latent, transition_hidden, constant_q=constant_q)
+        # the one-node recursion differentiates the LSTM transition's own q head only
+        self._one_node = transition_kind == "lstm" and not constant_q
+
+    def observe(self, inputs: torch.Tensor, starts: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+        """w, r (B, T, n); ``starts``: inputs[:, 0] is a sequence's first frame, where a memory
+        dim has its prior variance 1 (False for a streaming step's later frame)."""
+        w, r = super().observe(inputs)
+        m = self.memory_dims
+        if not m:
+            return w, r
+        observed = torch.arange(self.latent, device=w.device) < self.latent - m          # (n,)
+        first = torch.zeros(w.shape[1], 1, dtype=torch.bool, device=w.device)
+        first[0] = starts                                                                 # (T, 1)
+        w = torch.where(observed, w, 0.0)
+        r = torch.where(observed, r, torch.where(first, 1.0, MEMORY_VARIANCE))
+        return w, r
+
+    def run_filter(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
+                   whole_sequence: bool | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Filter observations w (B, T, n) with noise variances r (B, T, n).
+
+        Returns posterior means z (B, T, n), posterior variances diag(P) (B, T, n) and,
+        if asked, the gains K (B, T, n, n) (else None). When gradients are wanted (training)
+        and gains are not, the LSTM transition's recursion runs as one autograd node with a
+        hand-written backward (``drfkit.models.recursion``); ``whole_sequence=False`` (default:
+        the ``whole_sequence`` attribute) forces the per-step loop below, which autograd
+        differentiates step by step (same values; the tests compare the two). Inference and
+        the basis transition always take the per-step loop.
+        """
+        check_observations(w, r, self.latent)
+        whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
+        if whole_sequence and self._one_node and not return_gains and torch.is_grad_enabled() and (
+                w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
+            z, p_diag = drf_recursion(self.transition, w, r)
+            return z, p_diag, None
+        trace = self.filter_steps(w, r, return_gains=return_gains)
+        return trace["z"], trace["p_diag"], trace.get("gains")
+
+    def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
+                     return_transition: bool = False, return_prior: bool = False) -> dict[str, torch.Tensor]:
+        """The per-step filter loop on w, r (B, T, n), recording what was asked.
+
+        Always: 'z', 'p_diag' (B, T, n). ``return_gains``: 'gains' K (B, T, n, n), I at t = 0.
+        ``return_transition``: 'F' (B, T-1, n, n), F_t for t = 1..T-1; 'q' (B, T-1, n); 'z_prior'
+        (B, T-1, n) = F_t z_{t-1}, the prediction of z_t before w_t is seen.
+        ``return_prior``: 'z_prior' and 'p_prior' (B, T-1, n) = diag(F_t P_{t-1} F_t^T) + q_t, the
+        prior's variances.
+        """
+        batch, steps, n = w.shape
+        # unbind once: indexing w[:, t] in the loop would make the backward pass build
+        # and sum T zero-padded (B, T, n) gradients, one per step
+        w_steps, r_steps = w.unbind(1), r.unbind(1)
+        z, p_diag = w_steps[0], r_steps[0]
+        P = torch.diag_embed(p_diag)
+        means, variances = [z], [p_diag]
+        gains = [self.transition.eye.expand(batch, n, n)] if return_gains else None
+        Fs, qs, priors, prior_vars = [], [], [], []
+        state = self.transition.initial_state(batch, w)
+        for t in range(1, steps):
+            F_t, q_t, state = self.transition(z, state)
+            if return_transition:
+                Fs.append(F_t), qs.append(q_t)
+            if return_transition or return_prior:
+                priors.append((F_t @ z.unsqueeze(-1)).squeeze(-1))
+            if return_prior:  # diag(F P F^T) without forming the product
+                prior_vars.append(torch.einsum("bij,bjk,bik->bi", F_t, P, F_t) + q_t)
+            z, P, K = kalman_step(z, P, F_t, q_t, w_steps[t], r_steps[t])
+            means.append(z)
+            variances.append(P.diagonal(dim1=-2, dim2=-1))
+            if gains is not None:
+                gains.append(K)
+        out = {"z": torch.stack(means, dim=1), "p_diag": torch.stack(variances, dim=1)}
+        if gains is not None:
+            out["gains"] = torch.stack(gains, dim=1)
+        empty = w.new_empty(batch, 0, n)
+        if return_transition:
+            out["F"] = torch.stack(Fs, dim=1) if Fs else w.new_empty(batch, 0, n, n)
+            out["q"] = torch.stack(qs, dim=1) if qs else empty
+        if return_transition or return_prior:
+            out["z_prior"] = torch.stack(priors, dim=1) if priors else empty
+        if return_prior:
+            out["p_prior"] = torch.stack(prior_vars, dim=1) if prior_vars else empty
+        return out
+
+    def forward_with_prior(self, inputs: torch.Tensor
+                           ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
+        """(mean, sigma) (B, T, out) of the posterior, as ``forward``, and (mean, sigma) (B, T-1, out)
+        decoded by the same decoder from the one-step prior [z_{t|t-1}, log diag P_{t|t-1}],
+        t = 1..T-1: what the filter expects of frame t before seeing it. Per-step loop."""
+        trace = self.filter_steps(*self.observe(inputs), return_prior=True)
+        posterior = self.head(mean_and_log_variance(trace["z"], trace["p_diag"]))
+        prior = self.head(mean_and_log_variance(trace["z_prior"], trace["p_prior"]))
+        return posterior, prior
+
+    def features(self, inputs, return_gains=False):
+        w, r = self.observe(inputs)
+        z, p_diag, gains = self.run_filter(w, r, return_gains)
+        return mean_and_log_variance(z, p_diag), gains
+
+    def initial_carry(self, frame: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, tuple]:
+        """The filter's state after the first frame (B, 1, ...): z_0 = w_0 (B, n),
+        P_0 = diag(r_0) (B, n, n) and the transition's initial state -- exactly what
+        ``filter_steps`` starts from."""
+        self._check_streaming(frame)
+        w, r = self.observe(frame)
+        z, p_diag = w[:, 0], r[:, 0]
+        return z, torch.diag_embed(p_diag), self.transition.initial_state(z.shape[0], z)
+
+    def stream_step(self, frame: torch.Tensor, carry: tuple[torch.Tensor, torch.Tensor, tuple]
+                    ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor, tuple]]:
+        """One filter step on the next frame (B, 1, ...) from the carried (z, P, state) of the
+        previous one: encoder, transition F_t, q_t from z_{t-1}, Kalman predict/update with
+        w_t, r_t. Returns h = [z_t, log diag P_t] (B, 1, 2n) and (z_t (B, n), P_t (B, n, n),
+        the transition's state)."""
+        self._check_streaming(frame)
+        z, P, state = carry
+        w, r = self.observe(frame, starts=False)
+        F_t, q_t, state = self.transition(z, state)
+        z, P, _ = kalman_step(z, P, F_t, q_t, w[:, 0], r[:, 0])
+        h = mean_and_log_variance(z, P.diagonal(dim1=-2, dim2=-1)).unsqueeze(1)
+        return h, (z, P, state)
