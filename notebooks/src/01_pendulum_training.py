@@ -411,8 +411,7 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # DRF coasts through the filter: the gain halves on pure noise, r rises with the noise, and its
 # blackout error is several times below the LSTM's and no_dynamics' trained the same way. Still short
 # of a full filter at this budget: r follows the noise only loosely and F does not beat "no change" on
-# clean frames. The book's protocol (`drfkit.protocols.PROTOCOLS['book']`) is the `book` variant; its
-# paper-scale confirmation is the table below.
+# clean frames. That `book` variant was the book's protocol until the second round below replaced it.
 
 # %% [markdown]
 # ## How the models are fit: the ablation's second round
@@ -425,8 +424,10 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # training noise redrawn on the fixed clean frames every epoch, cosine decay of the learning rate,
 # random 25-frame windows, the checkpoint selected on the validation MAE; each `fit_*` variant
 # varies one lever of that recipe (the plain NLL, an MSE warm-up, training blackouts, the benchmark's
-# native noise with its pure-noise frames) for the DRF, the LSTM and no_dynamics alike. Data: the
-# benchmark's own frames, validation split only. Rows are cached under
+# native noise with its pure-noise frames) for the DRF, the LSTM and no_dynamics alike, together with
+# three filter levers: a split decoder (the mean from z alone, σ from P alone, as the RKN's), a loss on
+# the one-step prior z_{t|t−1} as well as the posterior (so the transition must predict), and a
+# constant learned Q. Data: the benchmark's own frames, validation split only. Rows are cached under
 # `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit.ablation --budget
 # fit --out results/<profile>/ablation --variants ... --seeds 0 1 --threads 1`.
 
@@ -446,6 +447,20 @@ assert required <= set(zip(round2["variant"], round2["seed"])) and round2["mae_0
 # %%
 # NBVAL_IGNORE_OUTPUT
 print(ablation.round2_reading(round2_summary))
+
+# %% [markdown]
+# **The book's protocol is chosen by a rule stated before reading the result**: of the DRF variants
+# trained at the paper's max noise 0.5 with at least two seeds, the one that meets the most of the
+# filter's targets (the thresholds of claims F1 and F2: r follows the noise, the gain drops on pure
+# noise, F z predicts better than z, the state coasts through the blackout), ties broken by the MAE
+# at 0.75 (`ablation.mechanism_targets`). A DRF whose filter does not filter would answer a different
+# question than the paper's; accuracy alone would pick the paper's configuration, which stays the
+# paper protocol's. `tests/test_protocols.py` checks that `PROTOCOLS['book']` is this table's first
+# row on the committed rows.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.ablation_round2_seeds)))
 
 # %% [markdown]
 # ## The noise-regime map: where does a learned filter help?
@@ -481,9 +496,9 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 
 # %% [markdown]
 # ## Both protocols side by side
-# The paper's protocol (the models above) and the book's (`drfkit.protocols`: the ablation's
-# `book` variant for the DRF, and what applies of it to the baselines, each on the book's schedule
-# `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
+# The paper's protocol (the models above) and the book's (`drfkit.protocols`: the second round's
+# choice for the DRF, the same recipe and training data for the LSTM and no_dynamics, each on the
+# book's schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
 # the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
 # here; `python -m drfkit.studies --profile paper --study pendulum --protocol book --threads 1`
 # trains (or resumes) its runs.
