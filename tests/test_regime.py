@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from drfkit.book import regime_map
 from drfkit.study import ablation, regime
 from drfkit.methods.protocols import REGIME_BASES, REGIME_TRAIN_NOISE, VARIANTS, regime_variant, variant_spec
 
