@@ -1,9 +1,9 @@
 # The study book's commands. Only python3 (3.11) is needed; everything else is
 # installed into .venv from environment.txt the first time.
 PROFILE ?= paper
-# JOBS > 1: train the missing runs first on a Dask LocalCluster of JOBS workers (drfkit.grid)
+# JOBS > 1: train the missing runs first on a Dask LocalCluster of JOBS workers (drfkit.book.grid)
 JOBS ?= 1
-# REMEASURE=1: measure timings and compute the cached studies again (drfkit.measurements)
+# REMEASURE=1: measure timings and compute the cached studies again (drfkit.book.measurements)
 REMEASURE ?=
 REMEASURE_FLAG := $(if $(filter-out 0,$(REMEASURE)),--remeasure)
 PYTHON ?= python3
@@ -35,11 +35,11 @@ $(STAMP): environment.txt pyproject.toml
 	@touch $@
 
 reproduce: $(STAMP)
-	$(PY) -m drfkit.pipeline --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG)
+	$(PY) -m drfkit reproduce --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG)
 
 # the pipeline directly, not a second make: a SIGTERM to this make then reaches it (it dies with its parent)
 quick: $(STAMP)
-	$(PY) -m drfkit.pipeline --profile quick $(REMEASURE_FLAG)
+	$(PY) -m drfkit reproduce --profile quick $(REMEASURE_FLAG)
 
 test: $(STAMP) unit nbval
 
@@ -50,7 +50,7 @@ nbval: $(STAMP)
 	$(PY) -m pytest -q $(NBVAL_FLAGS) notebooks/
 
 bench: $(STAMP)
-	$(PY) -m drfkit.timing --profile $(PROFILE)
+	$(PY) -m drfkit bench --profile $(PROFILE)
 
 notebooks: $(STAMP)
 	$(PY) tools/build_notebooks.py --execute

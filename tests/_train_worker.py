@@ -4,8 +4,8 @@ import sys
 import torch
 
 from tests.test_train import tiny_data, CONFIG_KIND, train_cfg
-from drfkit.studies import model_config
-from drfkit.train import train_model
+from drfkit.study.studies import model_config
+from drfkit.methods.train import train_model
 
 if __name__ == "__main__":
     torch.set_num_threads(1)

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from drfkit.paths import REPO_ROOT
+from drfkit.util.paths import REPO_ROOT
 
 sys.path.insert(0, str(REPO_ROOT / "tools"))
 import booklib  # noqa: E402
@@ -23,7 +23,7 @@ def test_booklib_imports_no_sphinx_or_browser():
 
 
 def test_claim_anchors_are_unique_and_cover_every_claim():
-    from drfkit.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
+    from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
 
     anchors = [booklib.claim_anchor(c) for c in CLAIM_SOURCES]
     assert anchors[:2] == ["claim-c1", "claim-c2"] and "claim-c7a" in anchors and "claim-f2" in anchors
@@ -56,7 +56,7 @@ def test_manifest_problems():
 
 def test_manifest_check_against_the_real_params_api():
     """notebook_params of a profile, recorded as is, is no problem; one changed value is."""
-    from drfkit.params import load_profile, notebook_params
+    from drfkit.study.params import load_profile, notebook_params
 
     want = notebook_params("04_timing", load_profile("quick"))
     entry = {"status": "ok", "params": dict(want)}

@@ -2,8 +2,8 @@
 import pandas as pd
 import pytest
 
-from drfkit import budget
-from drfkit.params import load_profile, write_profile
+from drfkit.book import budget, train_runs
+from drfkit.study.params import load_profile, write_profile
 
 
 def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, monkeypatch):
@@ -33,8 +33,8 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
 
 
 def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
-    from drfkit import studies
-    from drfkit.params import notebook_params, validate
+    from drfkit.study import studies
+    from drfkit.study.params import notebook_params, validate
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     values = load_profile("quick")
@@ -44,7 +44,7 @@ def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
     path = tmp_path / "tiny.yaml"
     write_profile(path, values)
     # one of the two no_dynamics seeds fully trained: 2 of 4 epochs done, half the hours left
-    assert studies.main(["--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
+    assert train_runs.main(["--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "1"]) == 0
     assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
     row = pd.read_csv(tmp_path / "tiny" / "training_budget.csv").set_index(["study", "model"])
@@ -55,7 +55,7 @@ def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
 
 
 def test_budget_counts_a_run_stopped_by_patience_as_finished(tmp_path, monkeypatch):
-    from drfkit import studies
+    from drfkit.study import studies
     import torch
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
@@ -65,7 +65,7 @@ def test_budget_counts_a_run_stopped_by_patience_as_finished(tmp_path, monkeypat
                   pend_patience=1, seeds=[0])
     path = tmp_path / "tiny.yaml"
     write_profile(path, values)
-    from drfkit.params import notebook_params, validate
+    from drfkit.study.params import notebook_params, validate
 
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(str(path))))
     stem = studies.checkpoint_stem(P, "pendulum", "no_dynamics", 0)

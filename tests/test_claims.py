@@ -4,8 +4,8 @@ import math
 import pandas as pd
 import pytest
 
-from drfkit import claims
-from drfkit.evaluate import summarise, t975
+from drfkit.study import claims
+from drfkit.study.evaluate import summarise, t975
 
 
 def mae_table(values: dict, ci: float = 0.001) -> pd.DataFrame:
@@ -227,8 +227,8 @@ def test_summarise_t_interval():
 
 
 def test_paper_comparison_pairs_ours_with_the_paper():
-    from drfkit.paper import PENDULUM_MAE
-    from drfkit.report import paper_comparison
+    from drfkit.study.paper import PENDULUM_MAE
+    from drfkit.report.writers import paper_comparison
 
     summary = pend((0.01, 0.05), (0.03, 0.06), (0.05, 0.1)).assign(mae_ci=0.001)
     table = paper_comparison(summary, PENDULUM_MAE).set_index(["model", "noise"])
@@ -240,7 +240,7 @@ def test_paper_comparison_pairs_ours_with_the_paper():
 
 
 def test_summary_intervals_stay_inside_each_metrics_range():
-    from drfkit.evaluate import summarise
+    from drfkit.study.evaluate import summarise
 
     frame = pd.DataFrame({"model": ["a", "a"], "mae": [0.001, 0.2], "picp": [0.99, 0.6], "nll": [-3.0, 5.0]})
     row = summarise(frame, ["model"]).iloc[0]

@@ -13,7 +13,7 @@ import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-import drfkit.io as dio  # noqa: E402
+import drfkit.util.io as dio  # noqa: E402
 
 
 def _full(fd):

@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit import diagnostics, oracle
+from drfkit.methods import diagnostics, oracle
 from drfkit.data import pendulum as pend
-from drfkit.filter import kalman_predict, kalman_update
+from drfkit.core.filter import kalman_predict, kalman_update
 from drfkit.models import build_model, default_config
 from drfkit.models.basis import BasisTransition
 from drfkit.models.parts import LOG_R_RANGE
@@ -265,8 +265,8 @@ def test_constant_velocity_filter():
 
 
 def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
-    from drfkit import dynamics, studies
-    from drfkit.params import for_notebook, load_profile
+    from drfkit.study import dynamics, studies
+    from drfkit.study.params import for_notebook, load_profile
 
     P = for_notebook("01_pendulum_training", load_profile("quick"))
     asked = []
@@ -284,7 +284,7 @@ def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
     as every model's (``blackout_table``); a bound averaged over all 75 frames fails this."""
     from drfkit.data.noise import Noise
     from drfkit.data.pendulum import blackout_frames, generate_pendulum, with_blackout
-    from drfkit.dynamics import blackout_table, bound_on
+    from drfkit.study.dynamics import blackout_table, bound_on
 
     val = generate_pendulum(4, 60, Noise("rkn_uniform", 0.5), seed=5)
     dark = with_blackout(generate_pendulum(3, 60, Noise("rkn_uniform", 0.5), seed=6), *blackout_frames(60), seed=1)
@@ -304,7 +304,7 @@ def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
 def test_encoder_accuracy_check_draws_the_asked_accuracy_and_filters_it():
     """The drawn per-frame errors have the asked MAE (E|e| = s sqrt(2/pi)); the true-physics filter
     on them does better than the encoder; a more accurate encoder gives a better filter."""
-    from drfkit.dynamics import encoder_accuracy_check
+    from drfkit.study.dynamics import encoder_accuracy_check
 
     rng = np.random.default_rng(0)
     theta, _ = pend._simulate(rng.uniform(-np.pi, np.pi, 8), 30, rng)

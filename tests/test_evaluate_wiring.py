@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-import drfkit.uncertainty as unc
-from drfkit.evaluate import evaluate_model_rates
-from drfkit.train import SequenceData
+import drfkit.methods.uncertainty as unc
+from drfkit.study.evaluate import evaluate_model_rates
+from drfkit.methods.train import SequenceData
 
 Z975 = 1.959963984540054  # the 97.5 % quantile of N(0, 1)
 
@@ -55,8 +55,8 @@ def _stub_study(monkeypatch, tmp_path):
     prediction fixed (mean, aleatoric 0.3, epistemic 0.4: total 0.5)."""
     import types
 
-    import drfkit.evaluate as ev
-    from drfkit import studies
+    import drfkit.study.evaluate as ev
+    from drfkit.study import studies
 
     mean = torch.tensor([[[0.0], [1.0], [2.0]], [[0.5], [0.0], [9.0]]])
     targets = torch.tensor([[[0.1], [1.5], [2.0]], [[0.0], [-1.2], [100.0]]])
@@ -74,7 +74,7 @@ def _stub_study(monkeypatch, tmp_path):
 
 
 def test_evaluate_study_rows_carry_the_total_sigma_metrics(monkeypatch, tmp_path):
-    from drfkit.evaluate import evaluate_study
+    from drfkit.study.evaluate import evaluate_study
 
     P, models = _stub_study(monkeypatch, tmp_path)
     rows = evaluate_study(P, "pedestrians", [0.01, 0.05], models=models)
@@ -88,7 +88,7 @@ def test_evaluate_study_rows_carry_the_total_sigma_metrics(monkeypatch, tmp_path
 def test_calibration_points_count_standardised_residuals_of_the_total_sigma(monkeypatch, tmp_path):
     """Residuals / total sigma on the real frames: 0.2, 1.0, 0.0, -1.0, -2.4; at the 50 % level the
     observed fraction at or below the median is 3/5, at 95 % (z 1.645) all five."""
-    from drfkit.evaluate import calibration_points
+    from drfkit.study.evaluate import calibration_points
 
     P, models = _stub_study(monkeypatch, tmp_path)
     cal = calibration_points(P, "pedestrians", [0.05], models=models).set_index("expected")["observed"]

@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import pytest  # noqa: E402
 
-from drfkit import figures  # noqa: E402
+from drfkit.report import figures  # noqa: E402
 
 PEND = ["drf", "no_dynamics", "lstm"]
 PED = ["drf", "no_dynamics", "lstm", "monoloco"]

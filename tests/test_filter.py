@@ -1,4 +1,4 @@
-"""Tests of drfkit.filter against an independent numpy Kalman filter and known answers."""
+"""Tests of drfkit.core.filter against an independent numpy Kalman filter and known answers."""
 import math
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit.filter import kalman_predict, kalman_step, kalman_update
+from drfkit.core.filter import kalman_predict, kalman_step, kalman_update
 
 
 # --------------------------------------------------------------------------- helpers
@@ -359,7 +359,7 @@ def test_fused_step_matches_composed_values_and_gradients(used):
 def test_fused_backward_for_symmetric_inputs_matches_the_general_one_and_writes_out_F():
     # symmetric=True (the DRF recursion's case) skips sym(g_P) and P + P^T; with symmetric
     # P and g_P it must give the general backward's gradients, dL/dF written into out_F
-    from drfkit.filter import fused_step_backward, fused_step_forward
+    from drfkit.core.filter import fused_step_backward, fused_step_forward
 
     args = _batched_args(seed=4)
     *_, saved = fused_step_forward(*args.values())
@@ -417,11 +417,11 @@ def test_fused_step_keeps_the_committed_paper_drf_predictions():
     # must give the same predictions (to float32 rounding) from its committed checkpoint.
     from pathlib import Path
 
-    import drfkit.filter as filter_module
+    import drfkit.core.filter as filter_module
     from drfkit import load_checkpoint
     from drfkit.data.pendulum import generate_pendulum
 
-    from drfkit.paths import REPO_ROOT
+    from drfkit.util.paths import REPO_ROOT
 
     # a committed paper-protocol DRF (the paper's LSTM transition): whichever frames it was trained on
     paths = sorted(Path(REPO_ROOT, "results", "paper", "models").glob("pendulum-drf-seed*-best.pt"))

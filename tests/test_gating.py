@@ -1,4 +1,4 @@
-"""Tests for drfkit.gating and drfkit.gating_study: the competency score, random gating,
+"""Tests for drfkit.methods.gating and drfkit.study.gating_study: the competency score, random gating,
 threshold choice on validation data only, and gated inference (MC dropout on selected frames,
 deterministic elsewhere) against the no-dropout and always-dropout results."""
 from __future__ import annotations
@@ -12,10 +12,11 @@ import pytest
 import torch
 
 import drfkit.models.parts as parts
-from drfkit import gating, gating_study
-from drfkit.metrics import rank_correlation
+from drfkit.methods import gating
+from drfkit.study import gating_study
+from drfkit.core.metrics import rank_correlation
 from drfkit.models import build_model, default_config
-from drfkit.train import SequenceData
+from drfkit.methods.train import SequenceData
 
 torch.set_num_threads(1)
 
@@ -157,7 +158,7 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     monkeypatch.setattr(gating, "choose_direction", record_direction)
     monkeypatch.setattr(gating, "choose_threshold", record_threshold)
-    from drfkit import studies
+    from drfkit.study import studies
 
     served = []
 

@@ -1,6 +1,6 @@
-"""The training grid on dask.distributed (``drfkit.grid``): every run one task, trained by the
+"""The training grid on dask.distributed (``drfkit.book.grid``): every run one task, trained by the
 sequential command's own code, so a LocalCluster of 2 workers gives the same checkpoints as
-``python -m drfkit.studies`` run by hand; a failing task is reported and the others go on; a
+``python -m drfkit train`` run by hand; a failing task is reported and the others go on; a
 rerun trains only what is missing and resumes what was cut short.
 
 The cluster tests take about a minute together (worker start-up dominates). Set
@@ -17,8 +17,9 @@ import pandas as pd
 import pytest
 import torch
 
-from drfkit import grid, studies
-from drfkit.params import ParameterError, load_profile, write_profile
+from drfkit.book import grid, train_runs
+from drfkit.study import studies
+from drfkit.study.params import ParameterError, load_profile, write_profile
 
 slow = pytest.mark.skipif(bool(os.environ.get("DRF_SKIP_SLOW")), reason="DRF_SKIP_SLOW is set: Dask cluster tests")
 
@@ -44,7 +45,7 @@ def reference(tiny, tmp_path_factory):
     root = tmp_path_factory.mktemp("sequential")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DRF_RESULTS", str(root))
-        assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1"]) == 0
+        assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1"]) == 0
     return root / "tiny"
 
 
@@ -128,16 +129,16 @@ def test_scheduler_argument():
 def test_without_scheduler_the_command_still_takes_exactly_one_study(tiny, capsys):
     for args in ([], ["--study", "pendulum", "pedestrians"]):
         with pytest.raises(SystemExit) as exc:
-            studies.main(["--profile", str(tiny), *args])
+            train_runs.main(["--profile", str(tiny), *args])
         assert exc.value.code == 2
     assert "exactly one study" in capsys.readouterr().err
-    assert studies.main(["--profile", str(tiny), "--scheduler", "nowhere"]) == 2
+    assert train_runs.main(["--profile", str(tiny), "--scheduler", "nowhere"]) == 2
 
 
 # ---------------------------------------------------------------------------- on a cluster
 @slow
 def test_local_cluster_of_two_gives_the_sequential_checkpoints(tiny, reference, results, capsys):
-    assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1",
+    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1",
                          "--scheduler", "local:2"]) == 0
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if line.startswith("[")]
@@ -152,14 +153,14 @@ def test_local_cluster_of_two_gives_the_sequential_checkpoints(tiny, reference, 
 
 @slow
 def test_a_failing_task_is_reported_and_the_others_go_on(tiny, reference, results, cluster, capsys):
-    from drfkit.io import exclusive_lock
+    from drfkit.util.io import exclusive_lock
 
     corrupt, locked = _stem(tiny, "lstm", 1), _stem(tiny, "no_dynamics", 0)
     corrupt.parent.mkdir(parents=True, exist_ok=True)
     Path(f"{corrupt}-last.pt").write_bytes(b"not a checkpoint")
     args = ["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]
     with exclusive_lock(locked.parent / f".{locked.name}.lock", "this test"):  # as another trainer would
-        assert studies.main(args) == 1
+        assert train_runs.main(args) == 1
     captured = capsys.readouterr()
     assert f"FAILED (LockedError: checkpoint {locked} is being written by process {os.getpid()}" in captured.out
     assert "FAILED (CorruptArtefactError" in captured.out and f"{RUNS - 2} trained" in captured.out
@@ -173,14 +174,14 @@ def test_a_failing_task_is_reported_and_the_others_go_on(tiny, reference, result
 @slow
 def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny, reference, results, cluster,
                                                                             capsys):
-    from drfkit.train import train_model
+    from drfkit.methods.train import train_model
 
     P = grid.study_params(studies, load_profile(tiny), "pendulum")
     torch.set_num_threads(1)
     # one run finished, one cut short after its first epoch, both by the sequential code
-    assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",
+    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",
                          "--threads", "1"]) == 0
-    from drfkit.io import param_hash
+    from drfkit.util.io import param_hash
 
     train_model(studies.model_config("pendulum", "lstm", P), studies.study_data(P, "pendulum", "train"),
                 studies.study_data(P, "pendulum", "val"), studies.train_config(P, "pendulum", "lstm", 1),
@@ -189,20 +190,20 @@ def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny
     finished = Path(f"{_stem(tiny, 'drf', 0)}-best.pt")
     mtime = finished.stat().st_mtime_ns
     capsys.readouterr()
-    assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
+    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
     out = capsys.readouterr().out
     assert f"{RUNS} runs, 1 already trained, {RUNS - 1} to train" in out
     assert "lstm seed 1: resumed at epoch 1, trained to epoch 2" in out
     assert finished.stat().st_mtime_ns == mtime  # not touched
     assert_same_checkpoints(results, reference)
-    assert studies.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
+    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
     assert f"{RUNS} runs, {RUNS} already trained, 0 to train" in capsys.readouterr().out
 
 
 @slow
 def test_pipeline_trains_the_grid_before_the_notebooks_only_when_asked(tiny, reference, results, cluster,
                                                                        monkeypatch, capsys):
-    from drfkit import pipeline
+    from drfkit.book import pipeline
 
     calls = []
     monkeypatch.setattr(pipeline, "run", lambda *a, **k: calls.append(a) or 0)
@@ -225,7 +226,7 @@ def test_killing_the_client_mid_grid_and_rerunning_resumes(tmp_path, cluster, ca
                              pend_batch_size=4, pend_models=["drf", "lstm"], seeds=[0])
     env = dict(os.environ, DRF_RESULTS=str(tmp_path / "results"), OMP_NUM_THREADS="1")
     models = tmp_path / "results" / "tiny" / "models"
-    proc = subprocess.Popen([sys.executable, "-m", "drfkit.studies", "--profile", str(profile), "--study", "pendulum",
+    proc = subprocess.Popen([sys.executable, "-m", "drfkit.book.train_runs", "--profile", str(profile), "--study", "pendulum",
                              "--threads", "1", "--scheduler", "local:2"], env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
@@ -254,7 +255,7 @@ def test_killing_the_client_mid_grid_and_rerunning_resumes(tmp_path, cluster, ca
     assert cut, epochs  # killed mid-run
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DRF_RESULTS", str(tmp_path / "results"))
-        assert studies.main(["--profile", str(profile), "--study", "pendulum", "--threads", "1",
+        assert train_runs.main(["--profile", str(profile), "--study", "pendulum", "--threads", "1",
                              "--scheduler", cluster]) == 0
     out = capsys.readouterr().out
     assert out.count("resumed at epoch") == len(cut), out

@@ -10,9 +10,9 @@ import time
 from pathlib import Path
 
 
-from drfkit import pipeline
-from drfkit.params import load_profile, write_profile
-from drfkit.paths import REPO_ROOT
+from drfkit.book import pipeline
+from drfkit.study.params import load_profile, write_profile
+from drfkit.util.paths import REPO_ROOT
 
 
 def _tree(pid: int) -> list[int]:

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from drfkit.io import (CorruptArtefactError, atomic_save_npz, atomic_torch_save, atomic_write_text,
+from drfkit.util.io import (CorruptArtefactError, atomic_save_npz, atomic_torch_save, atomic_write_text,
                        cached_npz, load_npz_checked, param_hash, torch_load_checked)
 
 

@@ -3,9 +3,9 @@ import json
 
 import pytest
 
-from drfkit.manifest import NotebookTimer, read_manifest, update_manifest
-from drfkit.params import load_profile, NOTEBOOKS
-from drfkit.runtime import start_notebook
+from drfkit.book.manifest import NotebookTimer, read_manifest, update_manifest
+from drfkit.study.params import load_profile, NOTEBOOKS
+from drfkit.book.runtime import start_notebook
 
 
 @pytest.fixture
@@ -44,7 +44,7 @@ def test_cell_times_name_cells_by_code_and_replace_a_notebooks_rows(tmp_path, mo
     import nbformat
     import pandas as pd
 
-    from drfkit.manifest import cell_times, record_cell_times
+    from drfkit.book.manifest import cell_times, record_cell_times
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     nb = nbformat.v4.new_notebook()

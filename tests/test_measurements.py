@@ -9,12 +9,12 @@ import pandas as pd
 import pytest
 import torch
 
-import drfkit.measurements as measurements
-from drfkit.manifest import NotebookTimer, read_manifest
-from drfkit.measurements import cached, fingerprint
+import drfkit.book.measurements as measurements
+from drfkit.book.manifest import NotebookTimer, read_manifest
+from drfkit.book.measurements import cached, fingerprint
 from drfkit.models import build_model, default_config
-from drfkit.paths import REPO_ROOT
-from drfkit.train import SequenceData, TrainConfig
+from drfkit.util.paths import REPO_ROOT
+from drfkit.methods.train import SequenceData, TrainConfig
 
 torch.set_num_threads(1)
 CALLS: list[tuple] = []
@@ -162,7 +162,7 @@ def test_make_passes_remeasure_to_the_pipeline():
 
 
 def test_the_pipeline_flag_sets_the_environment_for_the_kernels(monkeypatch):
-    import drfkit.pipeline as pipeline
+    import drfkit.book.pipeline as pipeline
 
     seen = {}
 

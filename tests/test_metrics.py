@@ -1,4 +1,4 @@
-"""Tests of drfkit.metrics: known values, hand-made cases, masks, calibration, errors."""
+"""Tests of drfkit.core.metrics: known values, hand-made cases, masks, calibration, errors."""
 import math
 from statistics import NormalDist
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from drfkit.metrics import (
+from drfkit.core.metrics import (
     DEFAULT_CALIBRATION_LEVELS, calibration_curve, calibration_error, crps_gaussian, gaussian_interval,
     gaussian_nll, interval_score, mae, mpiw, normal_cdf, normal_ppf, picp,
 )

@@ -1,4 +1,4 @@
-"""Training objectives and schedules (drfkit.objectives, drfkit.train) on small known cases."""
+"""Training objectives and schedules (drfkit.methods.objectives, drfkit.methods.train) on small known cases."""
 import math
 
 import numpy as np
@@ -7,11 +7,11 @@ import torch
 
 from drfkit.data.noise import Noise
 from drfkit.data.pendulum import generate_pendulum, redraw_noise
-from drfkit.io import torch_load_checked
+from drfkit.util.io import torch_load_checked
 from drfkit.models import gaussian_nll
-from drfkit.objectives import beta_nll, mse, objective_loss, random_windows
-from drfkit.studies import model_config
-from drfkit.train import SequenceData, TrainConfig, fingerprint, train_model
+from drfkit.methods.objectives import beta_nll, mse, objective_loss, random_windows
+from drfkit.study.studies import model_config
+from drfkit.methods.train import SequenceData, TrainConfig, fingerprint, train_model
 
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
@@ -156,8 +156,8 @@ def _frames(b=3, t=6, seed=0):
 @pytest.mark.parametrize("options", [{}, {"constant_q": True}, {"transition_kind": "basis", "memory_dims": 1}])
 def test_the_prior_is_the_predict_step_of_the_filter(options):
     """forward_with_prior decodes z_{t|t-1} = F_t z_{t-1} and diag(F_t P_{t-1} F_t^T + Q_t), recomputed
-    here with drfkit.filter.kalman_predict from the filter's own F_t, q_t and posteriors."""
-    from drfkit.filter import kalman_predict
+    here with drfkit.core.filter.kalman_predict from the filter's own F_t, q_t and posteriors."""
+    from drfkit.core.filter import kalman_predict
     from drfkit.models.parts import mean_and_log_variance
 
     model = _drf(**options)
@@ -167,7 +167,7 @@ def test_the_prior_is_the_predict_step_of_the_filter(options):
         trace = model.filter_steps(w, r, return_transition=True, return_prior=True)
         _, (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
         # P_{t-1} in full: rerun the filter step by step
-        from drfkit.filter import kalman_step
+        from drfkit.core.filter import kalman_step
 
         z, P = w[:, 0], torch.diag_embed(r[:, 0])
         for t in range(1, inputs.shape[1]):
@@ -182,7 +182,7 @@ def test_the_prior_is_the_predict_step_of_the_filter(options):
 
 
 def test_batch_loss_adds_the_weighted_prior_loss():
-    from drfkit.objectives import batch_loss
+    from drfkit.methods.objectives import batch_loss
 
     model = _drf()
     inputs, targets = _frames()
@@ -217,7 +217,7 @@ def test_constant_q_is_learned_and_the_same_at_every_step():
 
 
 def test_prior_weight_is_checked_and_stays_out_of_old_names():
-    from drfkit.train import naming_fields
+    from drfkit.methods.train import naming_fields
 
     with pytest.raises(ValueError, match="prior_weight"):
         TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0, prior_weight=-1.0)

@@ -7,9 +7,9 @@ import sys
 import pytest
 import yaml
 
-from drfkit.params import (NOTEBOOKS, PATHS, SPECS, ParameterError, load_profile, nest_profile, notebook_params,
+from drfkit.study.params import (NOTEBOOKS, PATHS, SPECS, ParameterError, load_profile, nest_profile, notebook_params,
                            parse_overrides, validate, write_profile)
-from drfkit.paths import NOTEBOOKS_DIR, PARAMS_DIR, REPO_ROOT
+from drfkit.util.paths import NOTEBOOKS_DIR, PARAMS_DIR, REPO_ROOT
 
 
 def quick_subset(nb):
@@ -36,7 +36,7 @@ def test_paper_profile_is_paper_scale():
 def test_committed_paper_pendulum_runs_trained_every_epoch():
     import pandas as pd
 
-    from drfkit.paths import REPO_ROOT
+    from drfkit.util.paths import REPO_ROOT
 
     paper = load_profile("paper")
     table = pd.read_csv(REPO_ROOT / "results/paper/tables/pendulum_model_selection.csv")
@@ -120,7 +120,7 @@ def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
     bad["pendulum"]["epohcs"] = 3
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(bad))
-    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
+    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "'pendulum.epohcs'" in proc.stderr and "unknown parameter" in proc.stderr and "'epochs'" in proc.stderr
@@ -129,7 +129,7 @@ def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
 
 def test_yaml_with_wrong_type_names_notebook_and_key(tmp_path):
     path = write_profile(tmp_path / "bad.yaml", load_profile("quick") | {"pend_epochs": "many"})
-    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path)],
+    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "pend_epochs" in proc.stderr and "notebook 01_pendulum_training" in proc.stderr
@@ -202,7 +202,7 @@ def test_notebook_stops_in_its_first_cell_on_an_unknown_parameter(tmp_path):
 
 
 def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path):
-    from drfkit.params import ParameterError, load_profile, notebook_params, validate
+    from drfkit.study.params import ParameterError, load_profile, notebook_params, validate
 
     values = load_profile("quick") | {"ped_source": "nuscenes", "nuscenes_root": str(tmp_path), "pifpaf_predictions": ""}
     with pytest.raises(ParameterError, match="needs 'pifpaf_predictions' \\[pedestrians\\.pifpaf_predictions\\] in the profile"):

@@ -271,7 +271,7 @@ def test_noise_is_checked_when_made(kind, level, error):
 
 
 def test_noise_kind_is_in_the_cache_key(tmp_path):
-    from drfkit.io import param_hash
+    from drfkit.util.io import param_hash
 
     assert Noise("rkn_uniform", 0.5).key() != Noise("salt_and_pepper", 0.5).key()
     assert Noise("rkn_uniform", 1) == Noise("rkn_uniform", 1.0) and isinstance(Noise("rkn_uniform", 1).level, float)

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from drfkit.params import load_profile, write_profile
-from drfkit.paths import REPO_ROOT
+from drfkit.study.params import load_profile, write_profile
+from drfkit.util.paths import REPO_ROOT
 
 
 def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
@@ -17,7 +17,7 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     path = tmp_path / "failing.yaml"
     write_profile(path, values)
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", str(path),
+    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path),
                            "--only", "00_data_prep", "04_timing"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 1, proc.stderr[-2000:]
@@ -32,8 +32,8 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
 
 
 def test_overrides_are_parsed_as_yaml_and_checked():
-    from drfkit.params import ParameterError
-    from drfkit.params import parse_overrides
+    from drfkit.study.params import ParameterError
+    from drfkit.study.params import parse_overrides
 
     assert parse_overrides(["eval_studies=[pedestrians]", "threads=1"]) == {"eval_studies": ["pedestrians"],
                                                                             "threads": 1}
@@ -46,7 +46,7 @@ def test_overrides_are_parsed_as_yaml_and_checked():
 
 def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit.pipeline", "--profile", "quick", "--only",
+    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", "quick", "--only",
                            "03_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]

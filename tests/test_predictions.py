@@ -5,11 +5,11 @@ from __future__ import annotations
 import pytest
 import torch
 
-import drfkit.predictions as predictions
-from drfkit.evaluate import evaluate_model_rates
+import drfkit.methods.predictions as predictions
+from drfkit.study.evaluate import evaluate_model_rates
 from drfkit.models import build_model, default_config
-from drfkit.train import SequenceData
-from drfkit.uncertainty import predict_rates
+from drfkit.methods.train import SequenceData
+from drfkit.methods.uncertainty import predict_rates
 
 torch.set_num_threads(1)
 

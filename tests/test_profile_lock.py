@@ -13,13 +13,13 @@ import subprocess
 import sys
 import time
 
-from drfkit import pipeline
-from drfkit.io import LockedError, exclusive_lock
-from drfkit.params import load_profile, write_profile
+from drfkit.book import pipeline
+from drfkit.util.io import LockedError, exclusive_lock
+from drfkit.study.params import load_profile, write_profile
 
 
 def _pipeline(profile, env, *extra):
-    return subprocess.Popen([sys.executable, "-m", "drfkit.pipeline", "--profile", str(profile), "--only",
+    return subprocess.Popen([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(profile), "--only",
                              "00_data_prep", *extra], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
 
@@ -94,12 +94,12 @@ def test_a_stale_lock_is_taken_over_with_a_message(tmp_path, capsys):
 
 
 def test_a_notebook_on_its_own_holds_the_profile(tmp_path, monkeypatch):
-    from drfkit import runtime
+    from drfkit.book import runtime
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     monkeypatch.delenv(pipeline.PIPELINE_ENV, raising=False)
     monkeypatch.setattr(runtime, "_HELD", {})
-    holder = subprocess.Popen([sys.executable, "-c", "import time; from drfkit import runtime; "
+    holder = subprocess.Popen([sys.executable, "-c", "import time; from drfkit.book import runtime; "
                                "runtime.hold_profile('solo'); print('held', flush=True); time.sleep(60)"],
                               env=dict(os.environ), stdout=subprocess.PIPE, text=True)
     try:

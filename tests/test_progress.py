@@ -6,7 +6,7 @@ import os
 import subprocess
 import sys
 
-from drfkit import progress
+from drfkit.util import progress
 
 
 def test_steps_write_nothing_without_the_variable(tmp_path, monkeypatch):
@@ -30,7 +30,7 @@ def test_steps_report_counts_and_the_last_step(tmp_path, monkeypatch):
 
 def test_echo_copies_a_child_process_lines_and_cleans_up(tmp_path):
     stream, path = io.StringIO(), tmp_path / ".nb.progress.log"
-    code = ("from drfkit.progress import steps\n"
+    code = ("from drfkit.util.progress import steps\n"
             "for _ in steps(range(2), 'child', every_s=0.0): pass\n")
     with progress.Echo(path, stream, poll_s=0.01):
         assert os.environ[progress.ENV] == str(path)

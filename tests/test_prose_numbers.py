@@ -1,12 +1,12 @@
 """Numbers typed into the README and docs/ are checked against the committed tables they quote: a
 rerun that moves a number and leaves the prose behind fails here. (Everything in the README's
-generated results section and in results/paper/report.md is written by `python -m drfkit.report`.)"""
+generated results section and in results/paper/report.md is written by `python -m drfkit report`.)"""
 import re
 
 import pandas as pd
 import pytest
 
-from drfkit.paths import REPO_ROOT
+from drfkit.util.paths import REPO_ROOT
 
 TABLES = REPO_ROOT / "results" / "paper" / "tables"
 
@@ -51,9 +51,9 @@ def test_the_readme_conclusions_quote_no_hand_typed_ratio():
 
 def test_the_round2_table_in_docs_is_the_rows_on_disk():
     """docs/dynamics.md quotes the second round's summary; regenerate it with
-    `python -m drfkit.ablation --budget fit --out results/paper/ablation --summary --markdown`."""
-    from drfkit import ablation
-    from drfkit.protocols import summarise_ablation
+    `python -m drfkit ablation --budget fit --out results/paper/ablation --summary --markdown`."""
+    from drfkit.study import ablation
+    from drfkit.methods.protocols import summarise_ablation
 
     text = (REPO_ROOT / "docs" / "dynamics.md").read_text()
     quoted = text.split("<!-- round2:start -->\n", 1)[1].split("\n<!-- round2:end -->", 1)[0].strip()

@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 import torch
 
-from drfkit import ablation, dynamics, studies
-from drfkit.params import load_profile, notebook_params, validate
-from drfkit.protocols import FIT_THE_MEAN, PROTOCOLS, VARIANTS, protocol_spec, summarise_ablation, variant_spec
+from drfkit.study import ablation, dynamics, studies
+from drfkit.study.params import load_profile, notebook_params, validate
+from drfkit.methods.protocols import FIT_THE_MEAN, PROTOCOLS, VARIANTS, protocol_spec, summarise_ablation, variant_spec
 
 torch.set_num_threads(1)
 
@@ -105,7 +105,7 @@ def test_the_book_protocol_is_what_the_second_round_chose_by_its_rule():
     """PROTOCOLS['book']['drf'] is the DRF variant that ``ablation.mechanism_targets`` ranks first on
     the committed validation rows of the second round (most of F1's and F2's targets met, then the
     lowest MAE at 0.75): a protocol picked by hand, or rows that change the choice, fail here."""
-    from drfkit.paths import REPO_ROOT
+    from drfkit.util.paths import REPO_ROOT
 
     summary = ablation.summarise_ablation(ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation"))
     ranked = ablation.mechanism_targets(summary)
@@ -115,7 +115,7 @@ def test_the_book_protocol_is_what_the_second_round_chose_by_its_rule():
 
 
 def test_mechanism_targets_use_the_claims_thresholds_at_their_boundaries():
-    from drfkit import claims
+    from drfkit.study import claims
 
     row = {"variant": "fit_book", "kind": "drf", "n_seeds": 2, "r_noise_spearman": claims.F1_RANK_CORRELATION,
            "gain_ratio_blackout": claims.F1_GAIN_RATIO, "prior_ratio": claims.F1_PREDICTION_RATIO,

@@ -3,7 +3,7 @@ import re
 
 import torch
 
-from drfkit.paths import REPO_ROOT
+from drfkit.util.paths import REPO_ROOT
 
 
 def test_readme_filter_example_runs_and_filters(capsys):
@@ -20,11 +20,11 @@ def test_readme_filter_example_runs_and_filters(capsys):
 
 
 def _run_with_step(step, monkeypatch):
-    import drfkit.filter
+    import drfkit.core.filter
 
     text = (REPO_ROOT / "README.md").read_text()
     code = re.search(r"### The filter on its own\n\n```python\n(.*?)```", text, re.S).group(1)
-    monkeypatch.setattr(drfkit.filter, "kalman_step", step)
+    monkeypatch.setattr(drfkit.core.filter, "kalman_step", step)
     namespace: dict = {}
     exec(compile(code, "README.md", "exec"), namespace)
     return torch.stack(namespace["errors"])[10:].mean(0)
@@ -34,7 +34,7 @@ def test_readme_filter_example_beats_no_update_and_the_raw_observations(monkeypa
     """On the same random draws (the step uses no randomness), the Kalman filter's error is at least
     20 % below both trivial estimators: predicting without updating (K = 0; an estimator that always
     says 0 does the same here) and taking each observation as it comes (K = I)."""
-    from drfkit.filter import kalman_step
+    from drfkit.core.filter import kalman_step
 
     def no_update(z, P, F, q, w, r):
         return F @ z, F @ P @ F.T + torch.diag(q), torch.zeros_like(P)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from drfkit.filter import kalman_predict, kalman_update
+from drfkit.core.filter import kalman_predict, kalman_update
 from drfkit.models import build_model, default_config
 from drfkit.models.parts import VARIANCE_FLOOR
 from drfkit.models.recursion import TransitionNetwork, _DRFRecursion, drf_recursion, lstm_cell

@@ -7,8 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from drfkit import ablation, regime
-from drfkit.protocols import REGIME_BASES, REGIME_TRAIN_NOISE, VARIANTS, regime_variant, variant_spec
+from drfkit.book import regime_map
+from drfkit.study import ablation, regime
+from drfkit.methods.protocols import REGIME_BASES, REGIME_TRAIN_NOISE, VARIANTS, regime_variant, variant_spec
 
 LEVELS = [0.0, 0.5, 1.0]
 
@@ -77,7 +78,7 @@ def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
     import matplotlib
 
     matplotlib.use("Agg")
-    from drfkit.figures import plot_regime
+    from drfkit.report.figures import plot_regime
 
     _, table = tiny_map
     fig = plot_regime(table, list(REGIME_BASES))
@@ -91,5 +92,5 @@ def test_bound_row_records_its_calibration(tiny_map):
 
 
 def test_the_command_names_a_bad_profile(capsys):
-    assert regime.main(["--profile", "no-such-profile"]) == 2
+    assert regime_map.main(["--profile", "no-such-profile"]) == 2
     assert "does not exist" in capsys.readouterr().out

@@ -3,8 +3,8 @@ import json
 
 import pandas as pd
 
-from drfkit import claims
-from drfkit.report import results_section
+from drfkit.study import claims
+from drfkit.report.writers import results_section
 
 
 def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monkeypatch):
@@ -113,7 +113,7 @@ def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, mon
 
 
 def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path):
-    from drfkit.report import dynamics_lines
+    from drfkit.report.writers import dynamics_lines
 
     assert dynamics_lines(tmp_path) == []
     pd.DataFrame({"protocol": ["paper", "book"], "model": ["drf", "drf"], "seed": [0, 0], "mae_0.5": [0.02, 0.01],
@@ -135,8 +135,8 @@ def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path)
 
 
 def test_dynamics_lines_show_the_regime_map(tmp_path):
-    from drfkit.regime import regime_summary
-    from drfkit.report import dynamics_lines
+    from drfkit.study.regime import regime_summary
+    from drfkit.report.writers import dynamics_lines
 
     rows = [{"train_noise": tn, "model": m, "seed": 0, "test": "0.75", "test_noise": 0.75, "mae": mae}
             for tn, m, mae in [(0.5, "drf", 0.04), (0.5, "lstm", 0.05), (0.5, "no_dynamics", 0.08),
@@ -149,7 +149,7 @@ def test_dynamics_lines_show_the_regime_map(tmp_path):
 
 
 def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tmp_path):
-    from drfkit.report import claims_summary_table
+    from drfkit.report.writers import claims_summary_table
 
     rows = [("C1", "paper", "not reproduced"), ("C1", "book", "partly"), ("C4", "paper", "reproduced")]
     pd.DataFrame([{"id": i, "protocol": p, "claim": f"claim {i}", "paper": "1 | 2", "ours": "x", "verdict": v,
@@ -168,8 +168,8 @@ def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tm
 
 def test_every_claim_links_evidence_that_the_paper_profile_has():
     """The claim map names files the committed paper profile holds (a renamed table or figure fails)."""
-    from drfkit.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
-    from drfkit.paths import REPO_ROOT
+    from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
+    from drfkit.util.paths import REPO_ROOT
 
     assert set(CLAIM_EVIDENCE) == set(CLAIM_SOURCES)
     root = REPO_ROOT / "results" / "paper"
@@ -186,7 +186,7 @@ def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
     import matplotlib
 
     matplotlib.use("Agg")
-    from drfkit.figures import plot_blackout
+    from drfkit.report.figures import plot_blackout
 
     frames = list(range(10))
     curve = lambda model, protocol, level: pd.DataFrame(  # noqa: E731

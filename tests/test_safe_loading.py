@@ -11,12 +11,12 @@ import pickle
 import pytest
 import torch
 
-import drfkit.measurements as measurements
-from drfkit.io import UnsafeArtefactError, torch_load_checked
+import drfkit.book.measurements as measurements
+from drfkit.util.io import UnsafeArtefactError, torch_load_checked
 from drfkit.models import build_model, default_config
-from drfkit.paths import REPO_ROOT
-from drfkit.predictions import cached_predict_rates, prediction_key
-from drfkit.train import SequenceData, TrainConfig, load_checkpoint, train_model
+from drfkit.util.paths import REPO_ROOT
+from drfkit.methods.predictions import cached_predict_rates, prediction_key
+from drfkit.methods.train import SequenceData, TrainConfig, load_checkpoint, train_model
 
 
 class Payload:

@@ -1,9 +1,10 @@
-"""``python -m drfkit.studies`` trains exactly the checkpoints a notebook would use, so a
+"""``python -m drfkit train`` trains exactly the checkpoints a notebook would use, so a
 long profile can be spread over processes or sessions."""
 import pytest
 
-from drfkit import studies
-from drfkit.params import load_profile, notebook_params, validate, write_profile
+from drfkit.book import train_runs
+from drfkit.study import studies
+from drfkit.study.params import load_profile, notebook_params, validate, write_profile
 
 
 @pytest.fixture
@@ -18,7 +19,7 @@ def tiny_profile(tmp_path, monkeypatch):
 
 
 def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_profile, tmp_path):
-    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
+    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "1", "--threads", "1"]) == 0
     models = tmp_path / "results" / "tiny" / "models"
     names = sorted(p.name for p in models.glob("*.pt"))
@@ -39,14 +40,14 @@ def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_pr
     (["--seeds", "9"], "not among the profile's seeds"),
 ])
 def test_cli_rejects_what_the_notebooks_would_never_use(tiny_profile, capsys, args, message):
-    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", *args]) == 2
+    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", *args]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_cli_set_overrides_the_profile(tiny_profile, tmp_path):
     import torch
 
-    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
+    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "0", "--threads", "1", "--set", "pend_epochs=2"]) == 0
     (last,) = (tmp_path / "results" / "tiny" / "models").glob("pendulum-no_dynamics-seed0-*-last.pt")
     assert torch.load(last, weights_only=False)["epoch"] == 2
@@ -58,12 +59,12 @@ def test_cli_set_overrides_the_profile(tiny_profile, tmp_path):
     ("pend_patience", "KEY=VALUE"),
 ])
 def test_cli_rejects_bad_overrides(tiny_profile, capsys, item, message):
-    assert studies.main(["--profile", str(tiny_profile), "--study", "pendulum", "--set", item]) == 2
+    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--set", item]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_cli_rejects_unknown_profile(capsys):
-    assert studies.main(["--profile", "no_such_profile", "--study", "pendulum"]) == 2
+    assert train_runs.main(["--profile", "no_such_profile", "--study", "pendulum"]) == 2
     assert "known profiles" in capsys.readouterr().err
 
 
@@ -96,19 +97,19 @@ def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatc
 
 
 def test_cli_trains_the_book_protocol_under_its_own_names_and_reports_a_held_lock(tiny_profile, tmp_path, capsys):
-    from drfkit.io import exclusive_lock
+    from drfkit.util.io import exclusive_lock
 
     args = ["--profile", str(tiny_profile), "--study", "pendulum", "--models", "drf", "--seeds", "0", "--threads", "1"]
-    assert studies.main(args + ["--protocol", "book"]) == 0
+    assert train_runs.main(args + ["--protocol", "book"]) == 0
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
     book, paper = studies.checkpoint_stem(P, "pendulum", "drf", 0, "book"), studies.checkpoint_stem(P, "pendulum", "drf", 0)
     assert book.with_name(book.name + "-best.pt").exists() and not paper.with_name(paper.name + "-best.pt").exists()
     with exclusive_lock(paper.parent / f".{paper.name}.lock", "test"):
-        import drfkit.train as train_module
+        import drfkit.methods.train as train_module
 
         saved, train_module.LOCK_WAIT_S = train_module.LOCK_WAIT_S, 0.0
         try:
-            assert studies.main(args) == 3
+            assert train_runs.main(args) == 3
         finally:
             train_module.LOCK_WAIT_S = saved
     err = capsys.readouterr().err
@@ -133,7 +134,7 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     seeded by the epoch alone; a protocol without a recipe keeps the model's loss and one draw."""
     import numpy as np
 
-    from drfkit import protocols
+    from drfkit.methods import protocols
 
     monkeypatch.setitem(protocols.PROTOCOLS, "book", {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout",
                                                       "lstm": "fit_lstm_blackout"})

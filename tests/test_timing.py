@@ -1,4 +1,4 @@
-"""drfkit.timing: the inference benchmark's table, the models' streaming steps it times and its
+"""drfkit.methods.timing: the inference benchmark's table, the models' streaming steps it times and its
 modes, the CLI; the training-speed studies and the clock."""
 from __future__ import annotations
 
@@ -9,12 +9,13 @@ import pandas as pd
 import pytest
 import torch
 
-from drfkit import timing
+from drfkit.methods import timing
+from drfkit.study import bench
 from drfkit.models import DeepRecursiveFilter, LSTMBaseline, NoDynamics, build_model, default_config, parts
 from drfkit.models.sequence import _EncodedSequenceModel
-from drfkit.params import write_profile
-from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
-                           inference_benchmark, make_frame_fn)
+from drfkit.study.params import write_profile
+from drfkit.study.bench import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
+                                inference_benchmark, make_frame_fn)
 
 TINY = dict(n_samples=3, batch_sizes=[1, 2], threads=[1], min_run_time=0.01)
 
@@ -76,7 +77,7 @@ def test_add_ratios_never_mixes_groups():
     assert drf["ratio_to_monoloco_published"].tolist() == [0.2, 0.5]
     assert drf["ratio_to_no_sampling"].tolist() == [2.0, 2.0]
     assert math.isnan(out[out["study"] == "pendulum"]["ratio_to_monoloco_published"].iloc[0])
-    assert timing.speedup_vs_monoloco(out, batch=1, threads=2, device="cpu") == pytest.approx(2.0)
+    assert bench.speedup_vs_monoloco(out, batch=1, threads=2, device="cpu") == pytest.approx(2.0)
     with pytest.raises(ValueError, match="more than one"):
         add_ratios(pd.DataFrame(rows + [rows[0]]))
 
@@ -255,7 +256,7 @@ def test_bad_arguments_fail_early_with_the_fix():
         inference_benchmark(0, batch_sizes=[1], threads=[1], min_run_time=0.01)
     if not torch.cuda.is_available():
         with pytest.raises(RuntimeError, match="no GPU"):
-            timing.timing_devices("cuda")
+            bench.timing_devices("cuda")
 
 
 def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
@@ -264,7 +265,7 @@ def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
     write_profile(profile, {
         "profile": "tiny", "seeds": [0], "device": "cpu", "threads": 0, "n_samples": 2,
         "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01})
-    assert timing.main(["--profile", str(profile)]) == 0
+    assert bench.main(["--profile", str(profile)]) == 0
     written = pd.read_csv(tmp_path / "results" / "tiny" / "timing.csv")
     assert list(written.columns) == COLUMNS
     assert len(written) == sum(len(MODES[k]) for _, _, kinds in STUDIES.values() for k in kinds)
@@ -295,7 +296,7 @@ def test_count_flops_of_known_products():
 
 def test_count_flops_of_the_cpu_lstm_layer_matches_its_cells():
     # nn.LSTM runs one oneDNN kernel per layer on the CPU, which torch's counter has no formula
-    # for; drfkit.timing adds one: the forward counts as the same network run as nn.LSTMCells
+    # for; drfkit.methods.timing adds one: the forward counts as the same network run as nn.LSTMCells
     T, B, n_in, H = 7, 5, 12, 16
     lstm = torch.nn.LSTM(n_in, H, num_layers=2, batch_first=True)
     cells = [torch.nn.LSTMCell(n_in, H), torch.nn.LSTMCell(H, H)]
@@ -446,7 +447,7 @@ def test_recursion_scaling_times_the_recursion_with_its_backward(monkeypatch):
 def test_epoch_times_rotates_models_and_takes_per_round_ratios(monkeypatch):
     from types import SimpleNamespace
 
-    import drfkit.train
+    import drfkit.methods.train
 
     per_round = {"no_dynamics": [2.0, 1.0, 4.0], "drf": [2.0, 5.0, 6.0]}  # per-round ratios 1, 5, 1.5
     calls = []
@@ -456,8 +457,8 @@ def test_epoch_times_rotates_models_and_takes_per_round_ratios(monkeypatch):
         seconds = per_round[config["kind"]][sum(c[0] == config["kind"] for c in calls) - 1]
         return SimpleNamespace(history=[{"seconds": seconds}])
 
-    monkeypatch.setattr(drfkit.train, "train_model", fake_train_model)
-    cfg = drfkit.train.TrainConfig(epochs=5, lr=1e-3, batch_size=4, seed=0)
+    monkeypatch.setattr(drfkit.methods.train, "train_model", fake_train_model)
+    cfg = drfkit.methods.train.TrainConfig(epochs=5, lr=1e-3, batch_size=4, seed=0)
     configs = {"no_dynamics": {"kind": "no_dynamics"}, "drf": {"kind": "drf"}}
     table = timing.epoch_times(configs, list(range(10)), None, {k: cfg for k in configs}, rounds=3, threads=1)
     assert [c[0] for c in calls] == ["no_dynamics", "drf", "drf", "no_dynamics", "no_dynamics", "drf"]
@@ -473,7 +474,7 @@ def test_epoch_times_rotates_models_and_takes_per_round_ratios(monkeypatch):
 
 def test_epoch_times_trains_real_epochs_in_a_temporary_folder(tmp_path, monkeypatch):
     from drfkit.models import default_config
-    from drfkit.train import SequenceData, TrainConfig
+    from drfkit.methods.train import SequenceData, TrainConfig
 
     monkeypatch.chdir(tmp_path)
     g = torch.Generator().manual_seed(0)

@@ -13,10 +13,10 @@ import torch
 
 from drfkit.data.noise import Noise
 from drfkit.data.pendulum import generate_pendulum
-from drfkit.io import CorruptArtefactError, torch_load_checked
-from drfkit.paths import REPO_ROOT
-from drfkit.studies import model_config
-from drfkit.train import NonFiniteLossError, SequenceData, TrainConfig, load_checkpoint, train_model
+from drfkit.util.io import CorruptArtefactError, torch_load_checked
+from drfkit.util.paths import REPO_ROOT
+from drfkit.study.studies import model_config
+from drfkit.methods.train import NonFiniteLossError, SequenceData, TrainConfig, load_checkpoint, train_model
 
 CONFIG_KIND = "drf"
 
@@ -171,7 +171,7 @@ def test_frames_flattens_only_real_frames():
 
 
 def test_patience_stops_after_no_improvement_and_a_rerun_is_a_cache_hit(tmp_path, monkeypatch):
-    import drfkit.train as train_mod
+    import drfkit.methods.train as train_mod
 
     train, val = tiny_data()
     cfg = model_config("pendulum", "no_dynamics")
@@ -191,7 +191,7 @@ def test_patience_stops_after_no_improvement_and_a_rerun_is_a_cache_hit(tmp_path
 
 
 def test_history_records_the_device_of_every_epoch(tmp_path):
-    from drfkit.train import history_frame
+    from drfkit.methods.train import history_frame
 
     train, val = tiny_data()
     res = train_model(model_config("pendulum", "no_dynamics"), train, val, train_cfg(epochs=2), tmp_path / "d",
@@ -209,7 +209,7 @@ def test_bad_patience_is_rejected(patience):
 def test_selection_audit_finds_best_epoch_and_longest_wait():
     import pandas as pd
 
-    from drfkit.train import selection_audit
+    from drfkit.methods.train import selection_audit
 
     val = [3.0, 2.0, 2.5, 2.6, 1.0, 1.5, 1.6, 1.7]  # improvements at epochs 1, 2, 5: longest wait 3
     curves = pd.DataFrame({"model": "drf", "seed": 0, "epoch": range(1, 9), "val_loss": val,
@@ -221,8 +221,8 @@ def test_selection_audit_finds_best_epoch_and_longest_wait():
 
 
 def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
-    import drfkit.train as train_mod
-    from drfkit.train import load_latest
+    import drfkit.methods.train as train_mod
+    from drfkit.methods.train import load_latest
 
     train, val = tiny_data()
     val_losses = iter([1.0, 2.0, 3.0])  # best is epoch 1, training ends at 3
@@ -238,7 +238,7 @@ def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
 def test_a_second_process_on_a_training_checkpoint_is_refused_and_writes_nothing(tmp_path):
     """Two real processes on one checkpoint: the second is refused with the holder named, the
     first's temp files are never swept from under it, and the first finishes normally."""
-    from drfkit.io import LockedError
+    from drfkit.util.io import LockedError
 
     epochs = 25
     stem = tmp_path / "shared"
@@ -254,7 +254,7 @@ def test_a_second_process_on_a_training_checkpoint_is_refused_and_writes_nothing
             time.sleep(0.02)
         train, val = tiny_data()
         before = torch_load_checked(last)["epoch"]
-        import drfkit.train as train_module
+        import drfkit.methods.train as train_module
 
         with pytest.raises(LockedError, match=f"process {proc.pid} on"):
             train_module.LOCK_WAIT_S, saved = 0.0, train_module.LOCK_WAIT_S
@@ -302,7 +302,7 @@ def test_a_lost_or_corrupt_best_checkpoint_is_restored_from_last(tmp_path, damag
 
 
 def test_an_unfinished_run_resumes_only_with_its_thread_count(tmp_path):
-    from drfkit.train import ResumeMismatchError
+    from drfkit.methods.train import ResumeMismatchError
 
     train, val = tiny_data()
     cfg = model_config("pendulum", CONFIG_KIND)
@@ -321,7 +321,7 @@ def test_selection_on_validation_l1_keeps_the_epoch_with_the_lowest_l1(tmp_path)
                       tmp_path / "l1", progress=False)
     l1 = [h["val_l1"] for h in res.history]
     assert res.best_epoch == int(np.argmin(l1)) + 1 and res.best_val_loss == min(l1)
-    from drfkit.train import history_frame
+    from drfkit.methods.train import history_frame
 
     assert history_frame(res.history)["val_l1"].tolist() == l1  # the training curves keep it
     model = load_checkpoint(res.best_path)
@@ -333,8 +333,8 @@ def test_selection_on_validation_l1_keeps_the_epoch_with_the_lowest_l1(tmp_path)
 
 
 def test_later_fields_at_their_defaults_leave_names_and_fingerprints_as_before():
-    from drfkit.io import param_hash
-    from drfkit.train import fingerprint, naming_fields
+    from drfkit.util.io import param_hash
+    from drfkit.methods.train import fingerprint, naming_fields
 
     cfg = train_cfg()
     later = ("select_on", "objective", "beta", "mse_warmup", "lr_schedule", "weight_decay", "window", "prior_weight")

@@ -1,4 +1,4 @@
-"""Tests for drfkit.uncertainty: shapes, the once-only deterministic pass, exact zero
+"""Tests for drfkit.methods.uncertainty: shapes, the once-only deterministic pass, exact zero
 epistemic spread without dropout, the summary formulas, intervals and argument checks."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import torch
 
 from drfkit.data.noise import Noise
 from drfkit.models import build_model, default_config
-from drfkit.uncertainty import Prediction, intervals, predict, summarise_samples
+from drfkit.methods.uncertainty import Prediction, intervals, predict, summarise_samples
 
 torch.set_num_threads(1)
 
@@ -202,7 +202,7 @@ def test_predict_rejects_bad_inputs():
 
 
 def test_predict_rates_shares_the_filter_and_matches_single_rate_predictions():
-    from drfkit.uncertainty import predict_rates
+    from drfkit.methods.uncertainty import predict_rates
 
     model = make("drf", "pendulum")
     calls = {"filter": 0}
@@ -241,10 +241,10 @@ def test_compare_prediction_modes_deterministic_has_no_epistemic_part():
     import torch
 
     from drfkit.data.pendulum import generate_pendulum
-    from drfkit.evaluate import compare_prediction_modes, prediction_metrics
+    from drfkit.study.evaluate import compare_prediction_modes, prediction_metrics
     from drfkit.models import build_model, default_config
-    from drfkit.train import SequenceData
-    from drfkit.uncertainty import predict
+    from drfkit.methods.train import SequenceData
+    from drfkit.methods.uncertainty import predict
 
     arrays = generate_pendulum(3, 7, Noise("rkn_uniform", 0.5), seed=1)
     data = SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))

@@ -65,7 +65,7 @@ def notebook_problems(name: str, entry: dict[str, Any] | None, expected: dict[st
                       expected_error: str | None = None) -> list[str]:
     """Why a notebook's page must be marked: its manifest entry (``notebooks.<name>``) missing, a
     status other than ``ok``, or recorded parameters that differ from the profile's
-    (``expected``: ``drfkit.params.notebook_params(name, load_profile(profile))``)."""
+    (``expected``: ``drfkit.study.params.notebook_params(name, load_profile(profile))``)."""
     if entry is None:
         return [f"the manifest has no entry for {name}: this page may come from another run"]
     problems = []
@@ -165,8 +165,8 @@ def claims_page(rows: list[dict[str, str]], evidence: dict[str, tuple], profile:
 
     lines = [f"# Claims of the paper, checked on profile `{profile}`", "",
              "Every row comes from `results/" + profile + "/claims.csv` (rendered there as `claims.md`); "
-             "verdicts are computed by the rule of each claim (`drfkit.claims`). `protocol` names how the "
-             "judged models were trained (`drfkit.protocols`).", ""]
+             "verdicts are computed by the rule of each claim (`drfkit.study.claims`). `protocol` names how the "
+             "judged models were trained (`drfkit.methods.protocols`).", ""]
     if simulated:
         lines += ["Pedestrian claims (" + ", ".join(sorted(simulated)) + ") are judged on the **simulated** "
                   "pedestrian source unless the profile says `pedestrians.source: nuscenes`.", ""]

@@ -44,7 +44,7 @@ def warn(message: str) -> None:
 def expected_params(profile: str) -> tuple[dict, str | None]:
     """{notebook: its parameters under the profile as it stands} and an error, if the profile
     cannot be read (every notebook is then marked)."""
-    from drfkit.params import NOTEBOOKS, ParameterError, load_profile, notebook_params
+    from drfkit.study.params import NOTEBOOKS, ParameterError, load_profile, notebook_params
 
     try:
         values = load_profile(profile)
@@ -74,7 +74,7 @@ def add_notebooks(src: Path, results: Path, profile: str) -> list[str]:
         want = expected.get(name)
         error = profile_error or (str(want) if isinstance(want, Exception) else None)
         if want is None and not error:
-            error = "the notebook is not one drfkit.params knows"
+            error = "the notebook is not one drfkit.study.params knows"
         problems = booklib.notebook_problems(name, manifest.get("notebooks", {}).get(name),
                                              None if error else want, error)
         nb = nbformat.read(path, as_version=4)
@@ -94,7 +94,7 @@ def add_notebooks(src: Path, results: Path, profile: str) -> list[str]:
 
 def assemble(src: Path, profile: str) -> dict:
     """The whole source tree; returns what went in (for the summary)."""
-    from drfkit.claims import CLAIM_EVIDENCE, CLAIM_SOURCES, PEDESTRIAN_CLAIMS
+    from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES, PEDESTRIAN_CLAIMS
 
     results = ROOT / "results" / profile
     if not sorted((results / "executed").glob("[0-9]*.ipynb")):
@@ -112,7 +112,7 @@ def assemble(src: Path, profile: str) -> dict:
     if report.is_file():
         shutil.copy2(report, mirror / "report.md")
     else:
-        warn(f"{report} is missing (python -m drfkit.report --profiles {profile} writes it)")
+        warn(f"{report} is missing (python -m drfkit report --profiles {profile} writes it)")
 
     docs = booklib.appendix_order(p.stem for p in (ROOT / "docs").glob("*.md") if p.stem != "book")
     (src / "docs").mkdir()

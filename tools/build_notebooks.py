@@ -23,7 +23,7 @@ SRC, OUT = ROOT / "notebooks" / "src", ROOT / "notebooks"
 def parameters_cell(notebook: str) -> str:
     """The notebook's parameters, with the quick profile's values (what nbval runs)."""
     sys.path.insert(0, str(ROOT))
-    from drfkit.params import NOTEBOOKS, PATHS, SPECS, load_profile
+    from drfkit.study.params import NOTEBOOKS, PATHS, SPECS, load_profile
 
     quick = load_profile("quick")
     lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them.",

@@ -25,7 +25,7 @@ One value for both: ``Noise(kind, level)``
 A noise setting is one value everywhere in the book: ``Noise("rkn_uniform", 0.5)`` (the pendulum's
 max noise) or ``Noise("salt_and_pepper", 0.025)`` (the pedestrians' p). The data layer takes it
 and hashes ``noise.key()`` into its cache names, so two kinds at the same level never share a
-file; each study names its kind in ``drfkit.registry`` (``Study.noise(level)``).
+file; each study names its kind in ``drfkit.study.registry`` (``Study.noise(level)``).
 """
 from __future__ import annotations
 

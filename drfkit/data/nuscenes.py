@@ -13,7 +13,7 @@ What you need on disk
 
 Pipeline for one noise level p
 ------------------------------
-1. ``python -m drfkit.data.nuscenes noisify --root R --out NOISY --p 0.025`` writes
+1. ``python -m drfkit nuscenes noisify --root R --out NOISY --p 0.025`` writes
    salt-and-pepper copies of the keyframe camera images (lossless PNG by default, so the
    noise is exactly the paper's, at the same relative path with a ``.png`` suffix).
 2. On a machine with PifPaf: ``mkdir -p predictions/p0.025`` (openpifpaf takes a missing
@@ -77,7 +77,7 @@ from drfkit.data.nuscenes_tables import ALL_CAMERAS, DEFAULT_CAMERAS, camera_ima
 from drfkit.data.pifpaf import (MIN_IOU, MONOLOCO_BOX_MARGIN, enlarge_boxes, expected_prediction_file,
                                 index_prediction_files, match_boxes, prediction_file_candidates, read_predictions)
 from drfkit.data.records import check_records
-from drfkit.io import atomic_write_bytes
+from drfkit.util.io import atomic_write_bytes
 
 
 # --------------------------------------------------------------------------- records
@@ -105,7 +105,7 @@ def load_nuscenes_records(
     if not predictions_dir.is_dir():
         raise FileNotFoundError(
             f"PifPaf predictions folder {predictions_dir} not found; write noisy images with "
-            f"`python -m drfkit.data.nuscenes noisify --p {p:g}`, then `mkdir -p {predictions_dir}` "
+            f"`python -m drfkit nuscenes noisify --p {p:g}`, then `mkdir -p {predictions_dir}` "
             f"(openpifpaf takes a missing folder as a file name) and run "
             f"`python -m openpifpaf.predict ... --json-output {predictions_dir}` on them"
         )
@@ -215,8 +215,8 @@ def write_noisy_images(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m drfkit.data.nuscenes noisify --root R --out O --p 0.025``."""
-    parser = argparse.ArgumentParser(prog="python -m drfkit.data.nuscenes", description=__doc__.split("\n")[0])
+    """Command line: ``python -m drfkit nuscenes noisify --root R --out O --p 0.025``."""
+    parser = argparse.ArgumentParser(prog="python -m drfkit nuscenes", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     noisify = sub.add_parser("noisify", help="write salt-and-pepper copies of the keyframe camera images")
     noisify.add_argument("--root", required=True, help="nuScenes folder holding '<version>/' and 'samples/'")

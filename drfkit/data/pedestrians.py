@@ -60,7 +60,7 @@ def load_pedestrians(
     nothing is cached (the files on disk are the source of truth).
     Both return records that pass ``check_records``.
     """
-    from drfkit.io import cached_npz
+    from drfkit.util.io import cached_npz
 
     check_noise(noise, "salt_and_pepper", "the pedestrian data")
     if source == "simulated":

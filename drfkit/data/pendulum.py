@@ -50,7 +50,11 @@ import re
 import numpy as np
 
 from drfkit.data.noise import Noise, blend_uniform_noise, check_noise, rkn_noise_factors
-from drfkit.io import cached_npz
+from drfkit.util.io import cached_npz
+
+# Seed conventions of the book's corrupted pendulum splits (every study draws them the same way).
+TRAINING_BLACKOUT_SEED_OFFSET = 7  # which training sequences get a blackout: data seed + this
+BLACKOUT_SEED_OFFSET = 11  # the blackout's pixel noise: split seed + this
 
 # Physics (the benchmark's values).
 MASS = 1.0

@@ -7,7 +7,7 @@ from typing import Any
 
 import torch
 
-from drfkit.filter import kalman_step
+from drfkit.core.filter import kalman_step
 from drfkit.models.basis import BasisTransition
 from drfkit.models.parts import mean_and_log_variance
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion

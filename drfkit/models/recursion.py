@@ -2,7 +2,7 @@
 -- as one autograd node with a hand-written backward.
 
 Per step the transition network (two LSTM cells on z_{t-1}, then one linear head) gives
-F_t and q_t, and the fused Kalman step (``drfkit.filter.fused_step_forward``) gives z_t, P_t.
+F_t and q_t, and the fused Kalman step (``drfkit.core.filter.fused_step_forward``) gives z_t, P_t.
 Left to autograd, every step records some forty small nodes (each LSTM gate, slice and
 view) and computes the weight gradients of the three layers once per step. Here the
 forward runs without a graph and keeps what the backward needs; the backward walks the
@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from torch import nn
 from torch.autograd.function import once_differentiable
 
-from drfkit.filter import fused_step_backward, fused_step_forward
+from drfkit.core.filter import fused_step_backward, fused_step_forward
 from drfkit.models.parts import VARIANCE_FLOOR, positive_elu
 
 

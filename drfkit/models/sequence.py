@@ -3,7 +3,7 @@ in ``drfkit.models.drf``.
 
 All three share the encoder, the observation heads and the decoder; they differ only in
 what sits between the heads and the decoder. Every model (Monoloco included) exposes
-the same interface, which the training loop, ``drfkit.uncertainty`` and the timing code
+the same interface, which the training loop, ``drfkit.methods.uncertainty`` and the timing code
 rely on:
 
     model.config                 dict that ``build_model`` turns back into the model
@@ -23,7 +23,7 @@ rely on:
                                  ``per_frame = True`` and inherits the stateless step; one with
                                  state defines both (see ``SequenceModel``)
 
-Training schedules are not the models' business: ``drfkit.studies.train_config`` holds them.
+Training schedules are not the models' business: ``drfkit.study.studies.train_config`` holds them.
 
 Inputs: 'pendulum' uint8 images (B, T, 24, 24); 'keypoints' float32 (B, T, 17, 3).
 Outputs: pendulum (B, T, 2) = (cos theta, sin theta); pedestrians (B, T, 1) depth (m).

@@ -18,7 +18,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("00_data_prep", globals())
 
@@ -26,10 +26,10 @@ P, timer = start_notebook("00_data_prep", globals())
 import matplotlib.pyplot as plt
 import numpy as np
 
-from drfkit import studies
+from drfkit.study import studies
 from drfkit.data.pendulum import estimate_angle
-from drfkit.figures import new_figure
-from drfkit.report import save_figure
+from drfkit.report.figures import new_figure
+from drfkit.report.writers import save_figure
 
 # %% [markdown]
 # ## The noisy pendulum

@@ -26,7 +26,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("01_pendulum_training", globals())
 
@@ -36,11 +36,11 @@ import numpy as np
 import pandas as pd
 import torch
 
-from drfkit import studies
-from drfkit.evaluate import evaluate_study, summarise
-from drfkit.figures import color, label, new_figure, plot_mae_bars, plot_picp_mpiw, plot_training_curves
-from drfkit.paper import PENDULUM_MAE, PENDULUM_PICP_MPIW
-from drfkit.report import epoch_times_line, paper_comparison, recursion_scaling_line, save_figure, save_table
+from drfkit.study import studies
+from drfkit.study.evaluate import evaluate_study, summarise
+from drfkit.report.figures import color, label, new_figure, plot_mae_bars, plot_picp_mpiw, plot_training_curves
+from drfkit.study.paper import PENDULUM_MAE, PENDULUM_PICP_MPIW
+from drfkit.report.writers import epoch_times_line, paper_comparison, recursion_scaling_line, save_figure, save_table
 
 # %% [markdown]
 # ## Training
@@ -76,7 +76,7 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.train import selection_audit
+from drfkit.methods.train import selection_audit
 
 audit = selection_audit(curves, P.pend_patience)
 save_table(P.profile, "pendulum_model_selection", audit)
@@ -92,8 +92,8 @@ audit.round(3)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.evaluate import compare_prediction_modes
-from drfkit.train import load_checkpoint, load_latest
+from drfkit.study.evaluate import compare_prediction_modes
+from drfkit.methods.train import load_checkpoint, load_latest
 
 val = studies.pendulum_data(P, "val")
 modes = []
@@ -135,8 +135,8 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.measurements import cached
-from drfkit.timing import training_step_times
+from drfkit.book.measurements import cached
+from drfkit.methods.timing import training_step_times
 
 train = studies.pendulum_data(P, "train")
 batch = min(50, len(train))
@@ -168,7 +168,7 @@ speed
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.timing import epoch_times
+from drfkit.methods.timing import epoch_times
 
 epochs = cached(P.profile, epoch_times, configs, train, val,
                 {k: studies.train_config(P, "pendulum", k, P.seeds[0]) for k in configs}, rounds=3, timing=True)
@@ -192,7 +192,7 @@ epochs
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.timing import recursion_scaling
+from drfkit.methods.timing import recursion_scaling
 
 scaling = pd.concat([cached(P.profile, recursion_scaling, configs["no_dynamics"], configs["drf"], train.inputs[:batch],
                             train.targets[:batch], min_run_time=0.5, min_rounds=15, threads=n, timing=True)
@@ -273,7 +273,7 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit import dynamics
+from drfkit.study import dynamics
 
 models = {key: load_checkpoint(res.best_path) for key, res in results.items()}
 level = max(P.pend_eval_max_noise)
@@ -361,7 +361,7 @@ for _, r in paper_check.iterrows():
 
 # %%
 from drfkit.data.pendulum import blackout_frames
-from drfkit.figures import plot_blackout
+from drfkit.report.figures import plot_blackout
 
 curves_dark = pd.concat([dynamics.blackout_curves(P, models), bound_curves], ignore_index=True)
 save_table(P.profile, "pendulum_blackout_curves", curves_dark)
@@ -390,8 +390,8 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit import ablation
-from drfkit.paths import results_dir
+from drfkit.study import ablation
+from drfkit.util.paths import results_dir
 
 rows = [ablation.run_variant(v, s, P.ablation_budget, results_dir(P.profile, "ablation"), progress=False)
         for v in P.ablation_variants for s in P.ablation_seeds]
@@ -478,10 +478,11 @@ ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.ablation_round
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit import regime
+from drfkit.book.regime_map import write_outputs
+from drfkit.study import regime
 
 regimes = regime.profile_map(P)
-regime_table = regime.write_outputs(P, regimes)  # tables and the figure, as `python -m drfkit.regime` writes them
+regime_table = write_outputs(P, regimes)  # tables and the figure, as `python -m drfkit regime` writes them
 plt.show()
 regime_table.round(4)
 
@@ -557,7 +558,7 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit import claims
+from drfkit.study import claims
 
 for protocol, (_, mech, dark) in pieces.items():
     own_bound = bounds[protocol].groupby("noise", sort=False)["mae"].mean()  # this protocol's no_dynamics

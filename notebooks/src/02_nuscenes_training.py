@@ -31,7 +31,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("02_nuscenes_training", globals())
 
@@ -40,11 +40,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from drfkit import studies
-from drfkit.evaluate import evaluate_study, summarise
-from drfkit.figures import label, plot_mae_bars, plot_training_curves
-from drfkit.paper import PEDESTRIAN_MAE
-from drfkit.report import paper_comparison, save_figure, save_table
+from drfkit.study import studies
+from drfkit.study.evaluate import evaluate_study, summarise
+from drfkit.report.figures import label, plot_mae_bars, plot_training_curves
+from drfkit.study.paper import PEDESTRIAN_MAE
+from drfkit.report.writers import paper_comparison, save_figure, save_table
 
 # %% [markdown]
 # ## How realistic is the simulated source?
@@ -58,7 +58,7 @@ from drfkit.report import paper_comparison, save_figure, save_table
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.data import sim_stats
+from drfkit.study import sim_stats
 
 if P.ped_source == "simulated":
     sim_truth, sim_records = sim_stats.simulate_profile(P)
@@ -151,8 +151,8 @@ for r in comparison.itertuples():
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit import dynamics
-from drfkit.train import load_checkpoint
+from drfkit.study import dynamics
+from drfkit.methods.train import load_checkpoint
 
 models = {key: load_checkpoint(res.best_path) for key, res in results.items()}
 bound = dynamics.pedestrian_bound(P, {s: m for (k, s), m in models.items() if k == "no_dynamics"}, models)

@@ -25,7 +25,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("03_ood_noise_evaluation", globals())
 
@@ -33,11 +33,11 @@ P, timer = start_notebook("03_ood_noise_evaluation", globals())
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from drfkit import claims, registry, studies
-from drfkit.evaluate import calibration_points, evaluate_study, summarise
-from drfkit.figures import plot_calibration, plot_mae_bars, plot_picp_mpiw, plot_sweep
-from drfkit.paper import PEDESTRIAN_MAE, PEDESTRIAN_PICP_MPIW, PENDULUM_MAE, PENDULUM_PICP_MPIW
-from drfkit.report import save_figure, save_table
+from drfkit.study import claims, registry, studies
+from drfkit.study.evaluate import calibration_points, evaluate_study, summarise
+from drfkit.report.figures import plot_calibration, plot_mae_bars, plot_picp_mpiw, plot_sweep
+from drfkit.study.paper import PEDESTRIAN_MAE, PEDESTRIAN_PICP_MPIW, PENDULUM_MAE, PENDULUM_PICP_MPIW
+from drfkit.report.writers import save_figure, save_table
 
 # %%
 # NBVAL_IGNORE_OUTPUT

@@ -53,7 +53,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("04_timing", globals())
 
@@ -64,15 +64,15 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from drfkit import claims
-from drfkit.figures import color, label, new_figure
-from drfkit.io import atomic_write_csv
-from drfkit.paper import TIMING_MS, TIMING_SPEEDUP
-from drfkit.paths import results_dir
-from drfkit.report import save_figure, save_table
-from drfkit.measurements import cached
-from drfkit.timing import (COLUMNS, MODES, STUDIES, add_ratios, inference_benchmark_with_load, lookup,
-                           speedup_vs_monoloco, timing_devices)
+from drfkit.study import claims
+from drfkit.report.figures import color, label, new_figure
+from drfkit.util.io import atomic_write_csv
+from drfkit.study.paper import TIMING_MS, TIMING_SPEEDUP
+from drfkit.util.paths import results_dir
+from drfkit.report.writers import save_figure, save_table
+from drfkit.book.measurements import cached
+from drfkit.study.bench import (COLUMNS, MODES, STUDIES, add_ratios, inference_benchmark_with_load, lookup,
+                                speedup_vs_monoloco, timing_devices)
 
 # %% [markdown]
 # ## The benchmark
@@ -182,7 +182,7 @@ def ms(model, mode, threads=claim_threads, batch=b1, device="cpu", column="media
 
 overhead = ms("drf", "batched") / ms("drf", "no_sampling")
 mono_step = ms("monoloco", "published") / P.n_samples
-SPEEDUP_TARGET, OVERHEAD_TARGET = claims.TIMING_SPEEDUP_TARGET, claims.SAMPLING_OVERHEAD_TARGET  # why: drfkit.claims
+SPEEDUP_TARGET, OVERHEAD_TARGET = claims.TIMING_SPEEDUP_TARGET, claims.SAMPLING_OVERHEAD_TARGET  # why: drfkit.study.claims
 checks = [(f"DRF (S samples) >= {SPEEDUP_TARGET:g}x faster than Monoloco as published, batch 1",
            speedup >= SPEEDUP_TARGET, f"{speedup:.2f}x"),
           (f"DRF S-sample prediction <= {OVERHEAD_TARGET:g}x its deterministic pass, batch 1",

@@ -55,7 +55,7 @@
 # %% tags=["parameters"]
 
 # %%
-from drfkit.runtime import start_notebook
+from drfkit.book.runtime import start_notebook
 
 P, timer = start_notebook("05_competency_gating", globals())
 
@@ -65,14 +65,15 @@ import numpy as np
 import pandas as pd
 import torch
 
-from drfkit import claims, gating, registry, studies
-from drfkit.evaluate import summarise
-from drfkit.figures import new_figure
-from drfkit.gating_study import gating_study, paper_table, train_noise_gates
-from drfkit.io import atomic_write_csv
-from drfkit.measurements import cached
-from drfkit.paths import results_dir
-from drfkit.report import save_figure, save_table
+from drfkit.study import claims, registry, studies
+from drfkit.methods import gating
+from drfkit.study.evaluate import summarise
+from drfkit.report.figures import new_figure
+from drfkit.study.gating_study import gating_study, paper_table, train_noise_gates
+from drfkit.util.io import atomic_write_csv
+from drfkit.book.measurements import cached
+from drfkit.util.paths import results_dir
+from drfkit.report.writers import save_figure, save_table
 
 STUDIES = tuple(P.eval_studies)  # both by default; see notebook 03
 PROTOCOLS = {s: registry.study(s).protocols(P) for s in STUDIES}  # study -> training protocols

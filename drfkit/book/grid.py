@@ -1,0 +1,334 @@
+"""The training grid on dask.distributed: every missing (study, protocol, model, seed) run of a
+profile as one task.
+
+    python -m drfkit train --profile paper --scheduler local:2 --threads 1
+    python -m drfkit train --profile paper --study pendulum --scheduler tcp://host:8786
+
+``local[:N]`` starts a ``LocalCluster`` of N single-threaded worker processes (default: the usable
+cores // the threads of one run); an address (``tcp://...``) connects to a running Dask scheduler
+(a lab cluster, a ``dask_jobqueue.SLURMCluster``), whose workers must import this drfkit and see
+the client's results folder at the same path (a shared file system).
+
+A task is the sequential command's own call, ``train_models(P, study, kinds=[kind], seeds=[seed])``,
+after ``drfkit.util.device.setup(threads, ...)`` as ``python -m drfkit train`` does: the same
+checkpoint files, the same OS lock per checkpoint stem, the same resume, so a run's numbers equal a
+sequential run's with the same thread count. Dask only decides where and when each run trains.
+
+``S`` below is the ``drfkit.study.studies`` module, passed in by its command line (and the pipeline's):
+it imports this module, so this one does not import it back.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from drfkit.study import registry
+from drfkit.study.params import ParameterError
+
+
+@dataclass(frozen=True)
+class Run:
+    """One training run of the grid."""
+
+    study: str
+    protocol: str
+    kind: str
+    seed: int
+
+    @property
+    def name(self) -> str:
+        return f"{self.study}/{self.protocol} {self.kind} seed {self.seed}"
+
+    @property
+    def key(self) -> str:  # the task's name on the dashboard (made unique per submission)
+        return f"train-{self.study}-{self.protocol}-{self.kind}-seed{self.seed}"
+
+
+# ------------------------------------------------------------------------------ the grid
+def study_params(S, values: dict[str, Any], study: str):
+    """The validated parameters of ``study``'s training notebook from a profile's values."""
+    return notebook_values(values, S.TRAINING_NOTEBOOK[study])
+
+
+def notebook_values(values: dict[str, Any], notebook: str):
+    from drfkit.study.params import for_notebook
+
+    return for_notebook(notebook, values)
+
+
+def study_protocols(P, study: str) -> list[str]:
+    """The protocols a profile's training notebook trains for ``study``."""
+    return registry.study(study).protocols(P)
+
+
+def grid_runs(S, values: dict[str, Any], studies: Iterable[str] | None = None, kinds: list[str] | None = None,
+              seeds: list[int] | None = None, protocol: str | None = None) -> list[Run]:
+    """Every run of the profile, filtered as the command line says; ``ParameterError`` for a
+    filter that names nothing the notebooks would train."""
+    studies = list(studies or sorted(S.STUDIES))
+    runs, known_models = [], set()
+    for study in studies:
+        P = study_params(S, values, study)
+        if set(seeds or []) - set(P.seeds):
+            raise ParameterError(f"--seeds {sorted(set(seeds) - set(P.seeds))} are not among the "
+                                 f"profile's seeds {P.seeds}; the notebooks would never use them")
+        models = S.study_models(P, study)
+        known_models |= set(models)
+        if len(studies) == 1 and set(kinds or []) - set(models):
+            raise ParameterError(f"--models {sorted(set(kinds) - set(models))} are not models of the {study} "
+                                 f"study in this profile; choose from {models}")
+        if protocol is None:
+            protocols = study_protocols(P, study)
+        elif study == "pedestrians" and protocol != "paper":
+            if len(studies) == 1:
+                raise ParameterError(f"the pedestrian study has only the paper's protocol so far, got {protocol!r}")
+            continue
+        else:
+            protocols = [protocol]
+        for proto in protocols:
+            for kind in models:
+                if kinds and kind not in kinds:
+                    continue
+                for seed in P.seeds:
+                    if not seeds or seed in seeds:
+                        runs.append(Run(study, proto, kind, seed))
+    if set(kinds or []) - known_models:
+        raise ParameterError(f"--models {sorted(set(kinds) - known_models)} are not models of the studies "
+                             f"{studies} in this profile; choose from {sorted(known_models)}")
+    return runs
+
+
+def run_finished_on_disk(S, P, run: Run) -> bool:
+    """Whether ``run``'s checkpoints are complete (a task would be a cache hit). A partial, corrupt
+    or differently configured run counts as missing: its task resumes it or reports why it cannot."""
+    from drfkit.util.io import CorruptArtefactError, param_hash, torch_load_checked
+    from drfkit.methods.train import fingerprint, run_finished
+
+    stem = S.checkpoint_stem(P, run.study, run.kind, run.seed, run.protocol)
+    last, best = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
+    if not (last.exists() and best.exists()):
+        return False
+    try:
+        state = torch_load_checked(last)
+        cfg = S.train_config(P, run.study, run.kind, run.seed, run.protocol)
+        fp = fingerprint(S.model_config(run.study, run.kind, P, run.protocol), cfg,
+                         param_hash(S.study_data_key(P, run.study, run.protocol)))
+        return state.get("fingerprint") == fp and run_finished(state["epoch"], state["best_epoch"], cfg)
+    except (CorruptArtefactError, KeyError, TypeError, AttributeError):  # the task says what is wrong
+        return False
+
+
+def train_run(train_models: Callable, notebook: str, values: dict[str, Any], run: Run, threads: int,
+              results_root: str) -> dict[str, Any]:
+    """The task: one run, exactly as the sequential ``python -m drfkit train`` trains it
+    (``train_models``: ``drfkit.study.studies.train_models``; ``notebook``: the study's training notebook)."""
+    from drfkit.util.device import setup
+
+    previous = os.environ.get("DRF_RESULTS")
+    os.environ["DRF_RESULTS"] = results_root  # the client's results folder (shared, same path)
+    try:
+        t0 = time.perf_counter()
+        P = notebook_values(values, notebook)
+        setup(threads, P.seeds[0], P.device)
+        res = train_models(P, run.study, progress=False, kinds=[run.kind], seeds=[run.seed],
+                           protocol=run.protocol)[(run.kind, run.seed)]
+    finally:
+        if previous is None:
+            os.environ.pop("DRF_RESULTS", None)
+        else:
+            os.environ["DRF_RESULTS"] = previous
+    try:
+        from distributed import get_worker
+
+        worker = get_worker().address
+    except (ImportError, ValueError):
+        worker = "in-process"
+    return {"seconds": time.perf_counter() - t0, "best_epoch": res.best_epoch, "best_val_loss": res.best_val_loss,
+            "epochs": len(res.history), "resumed_from": res.resumed_from, "stopped_early": res.stopped_early,
+            "best_path": str(res.best_path), "worker": worker}
+
+
+def describe(result: dict[str, Any]) -> str:
+    epochs, start = result["epochs"], result["resumed_from"]
+    if epochs == start:
+        what = f"already trained ({epochs} epochs)"
+    elif start:
+        what = f"resumed at epoch {start}, trained to epoch {epochs}"
+    else:
+        what = f"trained {epochs} epochs"
+    early = ", stopped early" if result["stopped_early"] else ""
+    return (f"{what}{early} in {result['seconds']:.1f} s, best epoch {result['best_epoch']} "
+            f"(val {result['best_val_loss']:.4f}) [{result['worker']}]")
+
+
+# --------------------------------------------------------------------------- the cluster
+def usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
+def parse_scheduler(scheduler: str, threads: int) -> tuple[str, int | None]:
+    """``'local'`` / ``'local:N'`` -> ('local', N); an address -> (address, None)."""
+    if scheduler == "local" or scheduler.startswith("local:"):
+        n = scheduler.partition(":")[2]
+        if n and not (n.isdigit() and int(n) >= 1):
+            raise ParameterError(f"--scheduler {scheduler!r}: N in local:N must be an integer >= 1")
+        return "local", int(n) if n else max(1, usable_cores() // max(threads, 1))
+    if "://" in scheduler:
+        return scheduler, None
+    raise ParameterError(f"--scheduler {scheduler!r}: use local, local:N or a scheduler address "
+                         "such as tcp://host:8786")
+
+
+class _Connection:
+    """A Dask client on a new LocalCluster (closed with it) or on a running scheduler."""
+
+    def __init__(self, scheduler: str, threads: int, n_runs: int):
+        from distributed import Client, LocalCluster
+
+        address, n_workers = parse_scheduler(scheduler, threads)
+        self.cluster = None
+        if address == "local":
+            self.cluster = LocalCluster(n_workers=min(n_workers, max(n_runs, 1)), threads_per_worker=1,
+                                        processes=True)
+            self.client = Client(self.cluster)
+        else:
+            self.client = Client(address)
+
+    def dashboard(self) -> str | None:
+        import importlib.util
+
+        if self.cluster is not None and importlib.util.find_spec("bokeh") is None:
+            return None  # the local scheduler serves no dashboard without bokeh (pip install bokeh)
+        try:
+            return self.client.dashboard_link if "dashboard" in self.client.scheduler_info()["services"] else None
+        except Exception:  # noqa: BLE001 -- an unreachable dashboard is not the grid's problem
+            return None
+
+    def close(self) -> None:
+        import logging
+
+        self.client.close()
+        if self.cluster is not None:
+            # a worker that trained often outlives the nanny's 4 s grace at shutdown and is killed, with a
+            # warning that says nothing about the runs (their checkpoints were written before)
+            quiet = lambda record: "still alive after" not in record.getMessage()  # noqa: E731
+            logger = logging.getLogger("distributed.nanny")
+            logger.addFilter(quiet)
+            try:
+                self.cluster.close()
+            finally:
+                logger.removeFilter(quiet)
+
+
+def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads: int,
+             out: Callable[[str], None] = print, write_curves: bool = False) -> dict[Run, Any]:
+    """Train the missing ``runs`` on ``scheduler``; one line per finished run through ``out``.
+
+    Returns ``{run: result dict}`` for the runs that finished (or were already complete) and
+    ``{run: exception}`` for those that failed; the others go on when one fails. With
+    ``write_curves`` a study's training curves table is written as the sequential command does
+    (every run of the study and protocol finished)."""
+    from drfkit.util.paths import results_root
+
+    t0 = time.perf_counter()
+    outcome: dict[Run, Any] = {}
+    params = {study: study_params(S, values, study) for study in {r.study for r in runs}}
+    todo = []
+    for run in runs:
+        if run_finished_on_disk(S, params[run.study], run):
+            outcome[run] = "done"
+        else:
+            todo.append(run)
+    done_before = len(outcome)
+    out(f"grid: {len(runs)} runs, {done_before} already trained, {len(todo)} to train "
+        f"({threads} torch thread(s) each)")
+    if todo:
+        # the data sets once, here: the tasks then read the caches instead of building them side by side
+        for study, protocol in sorted({(r.study, r.protocol) for r in todo}):
+            for split in ("train", "val"):
+                S.study_data(params[study], study, split, None, protocol)
+        conn = _Connection(scheduler, threads, len(todo))
+        try:
+            from distributed import as_completed
+
+            client = conn.client
+            workers = len(client.scheduler_info().get("workers", {}))
+            dashboard = conn.dashboard()
+            out(f"grid: scheduler {client.scheduler.address}, {workers} worker(s)"
+                + (f", dashboard {dashboard}" if dashboard else ""))
+            root = str(results_root())
+            token = uuid.uuid4().hex[:8]
+            futures = {client.submit(train_run, S.train_models, S.TRAINING_NOTEBOOK[run.study], values, run,
+                                     threads, root, key=f"{run.key}-{token}", pure=False, retries=0): run
+                       for run in todo}
+            for i, future in enumerate(as_completed(futures), 1):
+                run = futures[future]
+                if future.status == "error":
+                    exc = future.exception()
+                    outcome[run] = exc
+                    out(f"[{i}/{len(todo)}] {run.name}: FAILED ({type(exc).__name__}: {exc})")
+                else:
+                    outcome[run] = future.result()
+                    out(f"[{i}/{len(todo)}] {run.name}: {describe(outcome[run])}")
+        finally:
+            conn.close()
+    failed = [r for r, v in outcome.items() if isinstance(v, BaseException)]
+    out(f"grid: {len(todo) - len(failed)} trained, {done_before} already trained, {len(failed)} failed "
+        f"in {time.perf_counter() - t0:.1f} s")
+    if write_curves:
+        for study, protocol in sorted({(r.study, r.protocol) for r in runs}):
+            if not any(r.study == study and r.protocol == protocol for r in failed):
+                S.train_models(params[study], study, progress=False, protocol=protocol)  # cache hits
+    return outcome
+
+
+def pretrain(S, profile: str, overrides: dict[str, Any] | None, only: list[str] | None, scheduler: str,
+             threads: int | None = None, out: Callable[[str], None] = print) -> int:
+    """What ``python -m drfkit reproduce --jobs N`` does before the notebooks: every missing run of
+    the training notebooks it will execute (all, or those in ``only``) on ``scheduler``. The
+    notebooks then find the checkpoints and only evaluate. 0 when every run finished, else 1."""
+    from drfkit.study.params import NOTEBOOKS, load_profile, notebook_params
+
+    values = load_profile(profile) | (overrides or {})
+    for name in NOTEBOOKS:  # every notebook's parameters before an hour of training, as the pipeline does
+        if not only or name in only:
+            notebook_params(name, values)
+    studies = [s for s, nb in S.TRAINING_NOTEBOOK.items() if not only or nb in only]
+    if not studies:
+        return 0
+    runs = grid_runs(S, values, studies)
+    threads = threads or study_params(S, values, studies[0]).threads or 1
+    parse_scheduler(scheduler, threads)
+    outcome = run_grid(S, values, runs, scheduler, threads, out=out)
+    return 1 if any(isinstance(v, BaseException) for v in outcome.values()) else 0
+
+
+def main_grid(S, args) -> int:
+    """``python -m drfkit train ... --scheduler ...``: the parsed arguments of ``drfkit.book.train_runs.main``."""
+    from drfkit.study.params import load_profile, parse_overrides
+
+    try:
+        values = load_profile(args.profile) | parse_overrides(args.set)
+        runs = grid_runs(S, values, args.study, args.models or None, args.seeds or None, args.protocol)
+        threads = args.threads or study_params(S, values, runs[0].study if runs else "pendulum").threads or 1
+        parse_scheduler(args.scheduler, threads)
+    except ParameterError as exc:
+        print(f"parameter error: {exc}", file=sys.stderr)
+        return 2
+    outcome = run_grid(S, values, runs, args.scheduler, threads, out=lambda line: print(line, flush=True),
+                       write_curves=not args.models and not args.seeds)
+    failed = [r for r, v in outcome.items() if isinstance(v, BaseException)]
+    for run in failed:
+        print(f"error: {run.name}: {type(outcome[run]).__name__}: {outcome[run]}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+__all__ = ["Run", "grid_runs", "run_grid", "train_run", "run_finished_on_disk", "parse_scheduler", "pretrain", "main_grid"]

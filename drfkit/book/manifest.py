@@ -1,0 +1,196 @@
+"""The run manifest: everything needed to rerun a profile and to trust its numbers.
+
+``results/<profile>/manifest.json`` holds the machine, package versions, torch build and
+threads, the git commit, and one entry per notebook (its validated parameters, start,
+end, duration). Notebooks add their own entry when they start and finish, so a notebook
+run alone (nbval, papermill by hand) is recorded as well as a full ``make reproduce``.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import time
+from datetime import datetime, timezone
+from importlib import metadata
+from typing import Any
+
+from drfkit.util.io import atomic_write_json
+from drfkit.util.paths import REPO_ROOT, results_dir
+
+PACKAGES = ("torch", "numpy", "pandas", "matplotlib", "opencv-python-headless", "papermill", "nbval",
+            "PyYAML", "tqdm", "jupyter", "nbclient", "ipykernel", "pytest")
+
+
+def now_iso() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def git_commit() -> dict[str, Any]:
+    def run(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=REPO_ROOT, capture_output=True, text=True,
+                                  timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    return {"commit": run("rev-parse", "HEAD") or None, "dirty": bool(run("status", "--porcelain"))}
+
+
+def cpu_name() -> str:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def environment() -> dict[str, Any]:
+    import torch
+
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    return {
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpu": cpu_name(),
+        "cpu_count": os.cpu_count(),
+        "gpu": gpu,
+        "torch_threads": torch.get_num_threads(),
+        "torch_build": torch.__config__.show().strip().splitlines()[:6],
+        "packages": versions,
+        "git": git_commit(),
+    }
+
+
+def manifest_path(profile: str):
+    return results_dir(profile) / "manifest.json"
+
+
+def read_manifest(profile: str) -> dict[str, Any]:
+    path = manifest_path(profile)
+    if path.exists():
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError:
+            pass  # written atomically, so this is a hand-edit: start afresh
+    return {"profile": profile, "notebooks": {}}
+
+
+def update_manifest(profile: str, **fields: Any) -> dict[str, Any]:
+    manifest = read_manifest(profile)
+    manifest.update(fields)
+    manifest["environment"] = environment()
+    manifest["updated"] = now_iso()
+    atomic_write_json(manifest_path(profile), manifest)
+    return manifest
+
+
+def record_notebook(profile: str, notebook: str, **fields: Any) -> None:
+    """Merge ``fields`` into the manifest entry of ``notebook``."""
+    manifest = read_manifest(profile)
+    entry = manifest.setdefault("notebooks", {}).setdefault(notebook, {})
+    entry.update(fields)
+    manifest["environment"] = environment()
+    manifest["updated"] = now_iso()
+    atomic_write_json(manifest_path(profile), manifest)
+
+
+_REUSED: list[dict[str, Any]] = []  # measurement-cache entries this process reused (drfkit.book.measurements)
+
+
+def note_reused(entry: dict[str, Any]) -> None:
+    _REUSED.append(entry)
+
+
+def reused_measurements(clear: bool = False) -> list[dict[str, Any]]:
+    """The measurement-cache entries this process has reused so far (``clear``: and forget them)."""
+    out = list(_REUSED)
+    if clear:
+        _REUSED.clear()
+    return out
+
+
+class NotebookTimer:
+    """Records a notebook's start in the manifest; ``finish()`` records end and duration."""
+
+    def __init__(self, profile: str, notebook: str, params: dict[str, Any]):
+        self.profile, self.notebook = profile, notebook
+        self.t0 = time.perf_counter()
+        record_notebook(profile, notebook, params=params, started=now_iso(), finished=None,
+                        duration_s=None, status="running")
+
+    def finish(self, **extra: Any) -> float:
+        """Record the end, the duration and the measurement-cache entries this notebook reused
+        (``drfkit.book.measurements``: their timings were measured before, not in this run)."""
+        duration = time.perf_counter() - self.t0
+        record_notebook(self.profile, self.notebook, finished=now_iso(), duration_s=round(duration, 2),
+                        status="ok", reused_measurements=reused_measurements(clear=True), **extra)
+        return duration
+
+
+def cell_times(executed_notebook) -> list[dict[str, Any]]:
+    """Seconds of every code cell of a notebook executed by papermill (its ``papermill.duration``
+    cell metadata), with the cell's first line of code (comments skipped) to name it."""
+    import nbformat
+
+    nb = nbformat.read(str(executed_notebook), as_version=4)
+    rows = []
+    for index, cell in enumerate(nb.cells):
+        seconds = cell.metadata.get("papermill", {}).get("duration")
+        if cell.cell_type != "code" or seconds is None:
+            continue
+        code = [line for line in cell.source.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+        rows.append({"cell": index, "seconds": round(float(seconds), 2), "first_line": (code[0] if code else "")[:90]})
+    return rows
+
+
+def record_cell_times(profile: str, notebook: str, executed_notebook) -> None:
+    """Replace ``notebook``'s rows of ``results/<profile>/cell_times.csv`` (notebook, cell,
+    seconds, first_line): where a profile's time goes, cell by cell, from its last run."""
+    import pandas as pd
+
+    from drfkit.util.io import atomic_write_csv
+
+    path = results_dir(profile) / "cell_times.csv"
+    try:
+        rows = cell_times(executed_notebook)
+    except Exception as exc:  # a record of times must never fail the run it describes
+        print(f"note: no cell times for {notebook} ({type(exc).__name__}: {exc})")
+        return
+    new = pd.DataFrame(rows, columns=["cell", "seconds", "first_line"]).assign(notebook=notebook)
+    old = pd.read_csv(path) if path.exists() else new.iloc[:0]
+    table = pd.concat([old[old["notebook"] != notebook], new], ignore_index=True).sort_values(["notebook", "cell"])
+    atomic_write_csv(path, table[["notebook", "cell", "seconds", "first_line"]])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit manifest --cell-times PROFILE``: rebuild ``cell_times.csv`` from the
+    executed notebooks of a profile (the pipeline writes it after each notebook)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("--cell-times", metavar="PROFILE", required=True)
+    args = parser.parse_args(argv)
+    executed = sorted(results_dir(args.cell_times, "executed").glob("[0-9]*.ipynb"))
+    executed = [p for p in executed if not p.name.endswith(".failed.ipynb")]
+    if not executed:
+        print(f"no executed notebooks under results/{args.cell_times}/executed/; run the pipeline first")
+        return 1
+    for path in executed:
+        record_cell_times(args.cell_times, path.stem, path)
+    print(f"wrote results/{args.cell_times}/cell_times.csv from {len(executed)} notebooks")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,20 @@
+"""Layer 4, methods: what is done to models and arrays, with explicit arguments, never the
+profile: training (``train``, ``objectives``, ``protocols``), predictions with uncertainty
+(``uncertainty``, ``predictions``), Kalman-gain gating (``gating``), mechanism diagnostics
+(``diagnostics``), true-physics bounds (``oracle``), timing (``timing``). Imports util, core,
+data and models.
+
+The modules are re-exported by name (``from drfkit.methods import diagnostics``), loaded on first use;
+inside drfkit, import from the defining module (``from drfkit.methods.diagnostics import ...``).
+"""
+from __future__ import annotations
+
+import importlib
+
+__all__ = ['diagnostics', 'gating', 'objectives', 'oracle', 'predictions', 'protocols', 'timing', 'train', 'uncertainty']
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

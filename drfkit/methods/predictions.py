@@ -1,0 +1,91 @@
+"""Each MC-dropout prediction computed once: a cache on disk shared by every notebook.
+
+Notebooks 01, 03 and 05 evaluate the same checkpoints on the same test sets (01's table at
+the paper's levels is part of 03's sweep; 03's dropout-rate curves repeat 01's). A prediction
+is fixed by what went into it, so the cache file is named by the hash of exactly that:
+
+    key = the model's content (sha256 of its configuration and every weight), the inputs'
+          content (sha256 of their bytes), the dropout rates, the number of samples, the seed,
+          the chunk size (it orders the dropout masks) and the device type.
+
+Change any of these and the file name changes, so a stale entry is never read. Files live
+in ``results/<profile>/predictions/`` (not committed; delete the folder to empty the cache),
+written atomically; a damaged one is recomputed. Hashing the weights themselves (a few ms)
+rather than trusting a file name means a model changed after loading can never be served a
+stale prediction.
+
+    preds = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile),
+                                 n_samples=25, dropout_rates=[None], seed=0, label="pendulum test 0.75")
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from drfkit.util.io import CorruptArtefactError, atomic_torch_save, param_hash, torch_load_checked
+from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
+
+FORMAT = 1
+FIELDS = ("mean", "aleatoric", "epistemic", "total")
+
+
+def weights_sha256(model) -> str:
+    """sha256 of ``model.config`` and every tensor of its state dict (name, dtype, shape, bytes)."""
+    digest = hashlib.sha256(json.dumps(model.config, sort_keys=True, default=str).encode())
+    for name, tensor in sorted(model.state_dict().items()):
+        t = tensor.detach().cpu().contiguous()
+        digest.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+        digest.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def tensor_sha256(x: torch.Tensor) -> str:
+    t = x.detach().cpu().contiguous()
+    return hashlib.sha256(f"{t.dtype}|{tuple(t.shape)}|".encode() + t.reshape(-1).view(torch.uint8).numpy().tobytes()
+                          ).hexdigest()
+
+
+def prediction_key(model, inputs: torch.Tensor, n_samples: int, rates: list[float], seed: int,
+                   batch_size: int | None, device: torch.device | str | None) -> str:
+    """The cache file stem of a prediction (see the module docstring)."""
+    device_type = torch.device(device).type if device is not None else next(model.parameters()).device.type
+    return param_hash({"format": FORMAT, "model": weights_sha256(model), "inputs": tensor_sha256(inputs),
+                       "n_samples": int(n_samples), "rates": [float(r) for r in rates], "seed": int(seed),
+                       "batch_size": batch_size, "device": device_type})
+
+
+def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, dropout_rates, seed: int,
+                         batch_size: int | None = None, device=None, label: str = "") -> list[Prediction]:
+    """``drfkit.methods.uncertainty.predict_rates`` seeded with ``seed``, read from ``cache`` when the
+    same prediction was made before (the same numbers, bit for bit), else computed and stored.
+
+    ``cache=None`` switches the cache off; ``label`` is kept in the file for a reader.
+    """
+    x = as_model_input(model, inputs)
+    rates = [model.default_dropout_p if p is None else float(p) for p in dropout_rates]
+    path = None
+    if cache is not None:
+        path = Path(cache) / f"{prediction_key(model, x, n_samples, rates, seed, batch_size, device)}.pt"
+    if path is not None and path.exists():
+        try:
+            stored = torch_load_checked(path)
+            if stored.get("format") == FORMAT and len(stored["predictions"]) == len(rates):
+                return [Prediction(**{f: p[f] for f in FIELDS}, n_samples=p["n_samples"], dropout_p=p["dropout_p"])
+                        for p in stored["predictions"]]
+        except (CorruptArtefactError, KeyError, TypeError, AttributeError):
+            pass  # damaged: computed again and overwritten below
+    torch.manual_seed(seed)  # the dropout masks are part of the prediction
+    preds = predict_rates(model, x, n_samples=n_samples, dropout_rates=rates, batch_size=batch_size, device=device)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_torch_save(path, {"format": FORMAT, "label": label, "predictions": [
+            {**{f: getattr(p, f) for f in FIELDS}, "n_samples": p.n_samples, "dropout_p": p.dropout_p}
+            for p in preds]})
+    return preds
+
+
+__all__ = ["cached_predict_rates", "prediction_key", "tensor_sha256", "weights_sha256"]

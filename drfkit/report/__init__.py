@@ -1,0 +1,18 @@
+"""Layer 6, report: presentation: every plot, a model's label and colour (``figures``), tables
+and figures written atomically, the comparison with the paper, the README's results section
+and report.md (``writers``). Imports every layer below.
+
+The modules are re-exported by name (``from drfkit.report import figures``), loaded on first use;
+inside drfkit, import from the defining module (``from drfkit.report.figures import ...``).
+"""
+from __future__ import annotations
+
+import importlib
+
+__all__ = ['figures', 'writers']
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,22 @@
+"""Layer 5, study: the book's studies, the readers of the profile ``P`` (with ``drfkit.book``): the
+study registry (``registry``), the profile's schema (``params``), each study's data and runs
+(``studies``), evaluation over seeds (``evaluate``), the dynamics study (``dynamics``), the
+protocol ablation (``ablation``), the noise-regime map (``regime``), gating on test data
+(``gating_study``), the inference benchmark (``bench``), the simulator's statistics
+(``sim_stats``), the paper's numbers (``paper``) and the claims' verdicts (``claims``).
+Imports every layer below.
+
+The modules are re-exported by name (``from drfkit.study import ablation``), loaded on first use;
+inside drfkit, import from the defining module (``from drfkit.study.ablation import ...``).
+"""
+from __future__ import annotations
+
+import importlib
+
+__all__ = ['ablation', 'bench', 'claims', 'dynamics', 'evaluate', 'gating_study', 'paper', 'params', 'regime', 'registry', 'sim_stats', 'studies']
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,295 @@
+"""The pendulum dynamics study on a profile's trained models: does the filter filter, and how
+far is every model from what the true physics allows?
+
+* ``mechanism_table``  -- ``drfkit.methods.diagnostics`` per (model, seed) on the test split at one
+                          noise level and on the blackout test set
+* ``blackout_curves``  -- MAE per frame through the blackout (MC dropout mean, as every
+                          MAE the book reports)
+* ``physics_bound``    -- the particle filter with the true physics fed no_dynamics' per-frame
+                          estimates (``drfkit.methods.oracle``), its likelihood scale and outlier weight
+                          chosen on the VALIDATION split at the training noise; and the per-frame
+                          template-matching reference ("what the pixels hold")
+
+The bound and the reference use knowledge no learned model has (the generator's equations,
+its renderer); they say how far a learned model is from the limit, not what it should reach.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit.methods import oracle
+from drfkit.methods.oracle import bound_on, like_for_like_mae
+from drfkit.study import studies
+from drfkit.data.noise import Noise
+from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
+from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
+from drfkit.util.paths import predictions_dir
+from drfkit.methods.predictions import cached_predict_rates
+from drfkit.util.progress import steps
+
+
+
+def blackout_split(P, split: str) -> dict[str, np.ndarray]:
+    """A pendulum split at the training noise with its ``blackout_frames`` pure noise."""
+    arrays = studies.pendulum_split(P, split)
+    seed = P.pend_data_seed + studies.SPLIT_SEED_OFFSET[split] + BLACKOUT_SEED_OFFSET
+    return with_blackout(arrays, *blackout_frames(arrays["images"].shape[1]), seed=seed)
+
+
+def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """MC-dropout mean and total sigma of ``model`` on arrays['images'] (any model input), seeded."""
+    pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.n_samples,
+                                dropout_rates=[None], seed=seed, batch_size=256)[0]
+    return pred.mean.numpy(), pred.total.numpy()
+
+
+def mechanism_table(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "test") -> pd.DataFrame:
+    """One row per (model, seed): diagnostics on ``split`` at max noise ``noise`` (a pendulum
+    ``Noise`` or its level) and the gains on the blackout version of ``split``'s clean and
+    pure-noise frames."""
+    noise = studies.study_noise(P, "pendulum", noise).level
+    test, dark = studies.pendulum_split(P, split, noise), blackout_split(P, split)
+    rows = []
+    for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {noise:g}", len(models)):
+        row = {"model": kind, "seed": seed, "noise": float(noise),
+               **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
+        if kind == "drf":
+            on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
+            row |= {f"{k}_blackout": on_dark[k] for k in ("gain_clean", "gain_pure", "gain_ratio")}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def blackout_curves(P, models: dict[tuple[str, int], Any], split: str = "test") -> pd.DataFrame:
+    """MAE per frame of every (model, seed) on the blackout set of ``split``: columns model, seed, frame, mae."""
+    dark = blackout_split(P, split)
+    rows = []
+    for (kind, seed), model in steps(models.items(), "blackout curves", len(models)):
+        mean, _ = _mc_mean(P, model, dark, seed)
+        for frame, err in enumerate(abs_error_per_frame(mean, dark["targets"])):
+            rows.append({"model": kind, "seed": seed, "frame": frame, "mae": float(err)})
+    return pd.DataFrame(rows)
+
+
+def blackout_table(curves: pd.DataFrame) -> pd.DataFrame:
+    """Per model and seed: MAE on the blackout frames and on the 15 after (from ``blackout_curves``)."""
+    rows = []
+    for (kind, seed), run in curves.groupby(["model", "seed"], sort=False):
+        per_frame = run.sort_values("frame")["mae"].to_numpy()
+        rows.append({"model": kind, "seed": seed, **blackout_summary(per_frame, blackout_frames(per_frame.size))})
+    return pd.DataFrame(rows)
+
+
+def physics_bound(P, no_dynamics: dict[int, Any], levels, n_particles: int = 1000
+                  ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The true-physics particle filter on each no_dynamics seed's per-frame estimates.
+
+    Returns (table, curves): table rows per (seed, noise) with 'mae_input' (no_dynamics), 'mae'
+    (the bound), the calibrated 'sigma_scale' and 'outlier'; noise = 'blackout' for the blackout
+    test set. curves: the bound's MAE per frame on the blackout set (model = 'physics_bound').
+    """
+    val = studies.pendulum_split(P, "val")
+    sets = {float(level): studies.pendulum_split(P, "test", level) for level in levels}
+    sets["blackout"] = blackout_split(P, "test")
+    rows, curve_rows = [], []
+    for seed, model in steps(no_dynamics.items(), "true-physics bound (per no_dynamics seed)", len(no_dynamics)):
+        table, curves = bound_on(lambda arrays: _mc_mean(P, model, arrays, seed), val, sets, n_particles, seed)
+        rows.append(table.assign(seed=seed))
+        curve_rows.append(curves.assign(seed=seed))
+    order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "n_particles"]
+    return (pd.concat(rows, ignore_index=True)[order],
+            pd.concat(curve_rows, ignore_index=True)[["model", "seed", "frame", "mae"]])
+
+
+def encoder_accuracy_check(targets: np.ndarray, encoder_mae: dict[str, float], n_particles: int = 500,
+                           seed: int = 0) -> pd.DataFrame:
+    """Can any filter reach a claimed MAE from an encoder of a given accuracy? The most favourable
+    case: per-frame estimates = truth + independent Gaussian errors of a constant, known size, scaled
+    so that their MAE is ``encoder_mae[name]`` (E|e| = s sqrt(2/pi) per component), filtered by the
+    true-physics particle filter (the exact dynamics, the exact error model). Real encoders do worse
+    (errors grow on noisy frames, pure-noise frames carry nothing), so the filtered MAE here is a
+    lower bound for a filter on such an encoder.
+
+    targets: (N, T, 2) true (cos, sin). Returns one row per name: name, encoder_mae (wanted),
+    encoder_mae_drawn (measured on the draw), sigma, filtered_mae, n_particles."""
+    targets = np.asarray(targets, dtype=np.float64)
+    rows = []
+    for i, (name, mae) in enumerate(encoder_mae.items()):
+        sigma = float(mae) * math.sqrt(math.pi / 2.0)
+        rng = np.random.default_rng([seed, i])
+        est = targets + rng.normal(0.0, sigma, size=targets.shape)
+        filtered = oracle.pendulum_particle_filter(est, np.full_like(est, sigma), n_particles=n_particles, seed=seed)
+        rows.append({"name": name, "encoder_mae": float(mae), "encoder_mae_drawn": float(np.abs(est - targets).mean()),
+                     "sigma": sigma, "filtered_mae": float(np.abs(filtered - targets).mean()),
+                     "n_particles": n_particles})
+    return pd.DataFrame(rows)
+
+
+def pixel_reference(P, levels, n_angles: int = 4096) -> pd.DataFrame:
+    """Per-frame template matching against the renderer at each test noise level: MAE of
+    (cos, sin) of the best-matching angle. No dynamics, no learning, the true renderer."""
+    rows = []
+    for level in levels:
+        arrays = studies.pendulum_split(P, "test", level)
+        theta = oracle.template_angles(arrays["images"], n_angles)
+        est = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+        rows.append({"noise": float(level), "mae": float(np.abs(est - arrays["targets"]).mean()), "n_angles": n_angles})
+    return pd.DataFrame(rows)
+
+
+PROTOCOL_COLUMNS = ("r_noise_spearman", "gain_clean", "gain_pure_blackout", "gain_ratio_blackout", "prior_ratio",
+                    "spectral_radius_median")
+
+
+def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, dark: pd.DataFrame) -> pd.DataFrame:
+    """One row per (model, seed) of a protocol: MAE at each test level ('mae_<level>', from
+    ``evaluate_study``), on and after the blackout (``blackout_table``) and the mechanism checks
+    (``mechanism_table``; NaN where a model has no filter)."""
+    wide = evals.pivot_table(index=["model", "seed"], columns="noise", values="mae")
+    wide.columns = [f"mae_{c:g}" for c in wide.columns]
+    mech = mechanism.set_index(["model", "seed"]).reindex(columns=list(PROTOCOL_COLUMNS))
+    out = wide.join(dark.set_index(["model", "seed"])[["mae_blackout", "mae_after_blackout"]]).join(mech)
+    return out.reset_index().assign(protocol=protocol)[["protocol", "model", "seed", *out.columns]]
+
+
+# ------------------------------------------------------------------------------ pedestrians
+# Frames whose detection the pedestrian blackout removes (keypoints zeroed, confidence 0), in windows
+# whose every frame is real. No training window holds such an all-zero frame (a missed detection is
+# left out of its track, not zeroed), so every model reads one as a person about 50 m away
+# (docs/simulator.md, section 4); the bound is told which frames are missing.
+PEDESTRIAN_BLACKOUT = (4, 7)
+CV_SIGMA_SCALES = (0.5, 1.0, 2.0)
+CV_ACCEL_STDS = (0.25, 0.5, 1.0, 2.0, 4.0)  # m/s^2 of depth change: walking turns plus the ego car's drift
+
+
+def pedestrian_blackout(P, split: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The full-length windows of a pedestrian split at the training p with the detections of
+    frames PEDESTRIAN_BLACKOUT removed; returns (split arrays, (N, S) bool of removed frames)."""
+    seqs = studies.pedestrian_split(P, split)
+    full = seqs["mask"].all(axis=1)
+    start, stop = PEDESTRIAN_BLACKOUT
+    if seqs["mask"].shape[1] < stop + 1 or not full.any():
+        raise ValueError(f"the pedestrian blackout needs full windows of more than {stop} frames; ped_seq_len is "
+                         f"{seqs['mask'].shape[1]}")
+    out = {k: (v[full] if isinstance(v, np.ndarray) and v.shape[:1] == full.shape else v) for k, v in seqs.items()}
+    out["inputs"] = out["inputs"].copy()
+    out["inputs"][:, start:stop] = 0.0
+    removed = np.zeros(out["mask"].shape, bool)
+    removed[:, start:stop] = True
+    return out, removed
+
+
+def _depth_predictions(P, model, inputs: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    mean, total = _mc_mean(P, model, {"images": inputs}, seed)
+    return mean[..., 0], total[..., 0]
+
+
+def _seconds(seqs: dict[str, np.ndarray]) -> np.ndarray:
+    return np.diff(seqs["timestamp"], axis=1) / 1e6
+
+
+def _masked_mae(est: np.ndarray, target: np.ndarray, where: np.ndarray) -> float:
+    return float(np.abs(est - target)[where].mean())
+
+
+def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int], Any] | None = None
+                     ) -> pd.DataFrame:
+    """A constant-velocity Kalman filter on each no_dynamics seed's per-frame depths, its sigma scale
+    and acceleration noise chosen on the VALIDATION split at the training p; evaluated at every
+    ``ped_eval_p`` and on the pedestrian blackout (where it predicts through the removed frames).
+    With ``models``, their blackout MAE is added (noise 'blackout', model = kind). Rows: model,
+    seed, noise, mae (valid frames; on the blackout, the removed frames only)."""
+    val = studies.pedestrian_split(P, "val")
+    rows = []
+    for seed, model in no_dynamics.items():
+        mean, sigma = _depth_predictions(P, model, val["inputs"], seed)
+        target = val["targets"][..., 0]
+        best = (np.inf, None, None)
+        for scale in CV_SIGMA_SCALES:
+            for accel in CV_ACCEL_STDS:
+                est = oracle.constant_velocity_filter(mean, scale * sigma, val["mask"], dt=_seconds(val), accel_std=accel)
+                err = _masked_mae(est, target, val["mask"])
+                if err < best[0]:
+                    best = (err, scale, accel)
+        _, scale, accel = best
+        for p in P.ped_eval_p:
+            seqs = studies.pedestrian_split(P, "test", p)
+            mean, sigma = _depth_predictions(P, model, seqs["inputs"], seed)
+            est = oracle.constant_velocity_filter(mean, scale * sigma, seqs["mask"], dt=_seconds(seqs), accel_std=accel)
+            rows.append({"model": "cv_bound", "seed": seed, "noise": str(float(p)),
+                         "mae": _masked_mae(est, seqs["targets"][..., 0], seqs["mask"]),
+                         "sigma_scale": scale, "accel_std": accel})
+        dark, removed = pedestrian_blackout(P, "test")
+        mean, sigma = _depth_predictions(P, model, dark["inputs"], seed)
+        est = oracle.constant_velocity_filter(mean, scale * sigma, ~removed, dt=_seconds(dark), accel_std=accel)
+        rows.append({"model": "cv_bound", "seed": seed, "noise": "blackout",
+                     "mae": _masked_mae(est, dark["targets"][..., 0], removed), "sigma_scale": scale, "accel_std": accel})
+    if models:
+        dark, removed = pedestrian_blackout(P, "test")
+        for (kind, seed), model in models.items():
+            mean, _ = _depth_predictions(P, model, dark["inputs"], seed)
+            rows.append({"model": kind, "seed": seed, "noise": "blackout",
+                         "mae": _masked_mae(mean, dark["targets"][..., 0], removed)})
+    return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------------ command line
+def probe(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "val") -> pd.DataFrame:
+    """The mechanism checks and the blackout MAE of ``models`` on ``split`` (validation by
+    default: a run can be judged while it trains without touching the test set)."""
+    mech = mechanism_table(P, models, noise, split)
+    dark = blackout_table(blackout_curves(P, models, split))
+    return dark.merge(mech, on=["model", "seed"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit dynamics --profile paper --protocol book --models drf --seeds 0 [--last]``
+
+    Prints the mechanism checks (rank correlation of r with the frame's noise, gains on clean and
+    pure-noise frames, prediction ratio) and the blackout MAE of trained pendulum runs on the
+    validation split, from their selected checkpoints or (``--last``) the last epoch of a run
+    still training.
+    """
+    import argparse
+
+    from drfkit.study.params import for_command
+    from drfkit.methods.protocols import PROTOCOLS
+    from drfkit.util.device import setup
+    from drfkit.methods.train import load_checkpoint, load_latest
+
+    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
+    parser.add_argument("--profile", default="paper")
+    parser.add_argument("--protocol", default="paper", choices=sorted(PROTOCOLS))
+    parser.add_argument("--models", nargs="*", default=["drf"])
+    parser.add_argument("--seeds", nargs="*", type=int, default=[0])
+    parser.add_argument("--level", type=float, default=0.75, help="max noise of the mechanism checks")
+    parser.add_argument("--split", default="val", choices=["val", "test"])
+    parser.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args(argv)
+    P = for_command("01_pendulum_training", args.profile)
+    if P is None:
+        return 2
+    setup(args.threads, P.seeds[0], "cpu")
+    models = {}
+    for kind in args.models:
+        for seed in args.seeds:
+            stem = studies.checkpoint_stem(P, "pendulum", kind, seed, args.protocol)
+            if not (stem.parent / f"{stem.name}-best.pt").exists():
+                print(f"error: no checkpoint {stem}-best.pt; train it with python -m drfkit train --profile "
+                      f"{args.profile} --study pendulum --protocol {args.protocol} --models {kind} --seeds {seed}")
+                return 3
+            models[(kind, seed)] = load_latest(stem) if args.last else load_checkpoint(f"{stem}-best.pt")
+            print(f"{kind} seed {seed}: epoch {models[(kind, seed)].checkpoint_meta.get('epoch')}")
+    with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
+        print(probe(P, models, args.level, args.split).to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

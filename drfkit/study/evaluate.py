@@ -1,0 +1,149 @@
+"""Evaluation: metrics of one model on one data set, and summaries over seeds.
+
+Every number in the book's tables comes through ``evaluate_model`` (predict once with
+MC dropout, then all metrics on the same predictions) and ``summarise`` (mean and a
+95 % Student-t interval over seeds: mean ± t_{0.975, n-1} · sd / sqrt(n); with a single
+seed the interval is undefined and left empty).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit.core import metrics
+from drfkit.core.metrics import prediction_metrics, t975  # noqa: F401 (defined with the metrics)
+from drfkit.util.paths import predictions_dir
+from drfkit.methods.predictions import cached_predict_rates
+from drfkit.util.progress import steps
+from drfkit.methods.train import SequenceData
+
+METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
+# The values each metric can take (PICP is a fraction): interval ends are clipped to them.
+METRIC_RANGES = {"mae": (0.0, math.inf), "picp": (0.0, 1.0), "mpiw": (0.0, math.inf), "crps": (0.0, math.inf),
+                 "cal_error": (0.0, 1.0)}
+
+def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: float | None = None,
+                   level: float = 0.95, batch_size: int = 256, device=None) -> dict[str, float]:
+    """Predict ``data`` with MC dropout and return every metric (PICP as a fraction)."""
+    return evaluate_model_rates(model, data, n_samples=n_samples, dropout_rates=[dropout_p], level=level,
+                                batch_size=batch_size, device=device)[0]
+
+
+def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_rates, level: float = 0.95,
+                         batch_size: int = 256, device=None, seed: int | None = None, cache=None
+                         ) -> list[dict[str, float]]:
+    """``evaluate_model`` at several dropout rates; the encoder and filter run once. With a
+    ``seed`` the dropout masks are seeded here and the prediction may come from ``cache``
+    (``drfkit.methods.predictions``); without one the caller's random state is used."""
+    from drfkit.methods.uncertainty import predict_rates
+
+    if seed is None:
+        preds = predict_rates(model, data.inputs, n_samples=n_samples, dropout_rates=dropout_rates,
+                              batch_size=batch_size, device=device)
+    else:
+        preds = cached_predict_rates(model, data.inputs, cache=cache, n_samples=n_samples,
+                                     dropout_rates=dropout_rates, seed=seed, batch_size=batch_size, device=device)
+    out = []
+    for pred in preds:
+        m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
+        m["aleatoric"] = float(pred.aleatoric.mean())
+        m["epistemic"] = float(pred.epistemic.mean())
+        out.append(m)
+    return out
+
+
+def compare_prediction_modes(models: dict[str, Any], data: SequenceData, *, n_samples: int, level: float = 0.95,
+                             seed: int = 0, batch_size: int = 256) -> pd.DataFrame:
+    """Each model's metrics on ``data`` predicted two ways: one deterministic pass (dropout
+    off, what the validation loss of training uses) and MC dropout with ``n_samples`` passes
+    (what every reported number uses). One row per (name, mode)."""
+    from drfkit.methods.uncertainty import predict
+
+    rows = []
+    for name, model in models.items():
+        for mode, s in (("deterministic", 0), ("mc_dropout", n_samples)):
+            torch.manual_seed(seed)
+            pred = predict(model, data.inputs, n_samples=s, batch_size=batch_size)
+            rows.append({"checkpoint": name, "epoch": model.checkpoint_meta.get("epoch"), "mode": mode,
+                         **prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)})
+    return pd.DataFrame(rows)
+
+
+def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = METRICS) -> pd.DataFrame:
+    """Mean, 95 % t-interval half-width and seed count of ``values`` grouped ``by``.
+
+    Output columns: ``by...``, ``n_seeds``, and for each value ``<v>``, ``<v>_ci`` (half-width),
+    ``<v>_lo``, ``<v>_hi``.
+    """
+    by, values = list(by), [v for v in values if v in frame.columns]
+    rows = []
+    for key, group in frame.groupby(by, sort=False):
+        key = key if isinstance(key, tuple) else (key,)
+        row: dict[str, Any] = dict(zip(by, key))
+        row["n_seeds"] = len(group)
+        for v in values:
+            x = group[v].to_numpy(dtype=float)
+            mean = float(x.mean())
+            half = t975(len(x) - 1) * float(x.std(ddof=1)) / math.sqrt(len(x)) if len(x) > 1 else math.nan
+            lo, hi = METRIC_RANGES.get(v, (-math.inf, math.inf))
+            # with 2 or 3 seeds the t-interval is wide; its ends are clipped to what the metric can take
+            row.update({v: mean, f"{v}_ci": half, f"{v}_lo": max(mean - half, lo), f"{v}_hi": min(mean + half, hi)})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: Iterable[float | None] = (None,),
+                   models: dict | None = None) -> pd.DataFrame:
+    """Every trained (model, seed) of ``study`` at every test noise level and dropout rate.
+
+    Returns one row per (model, seed, noise, dropout_p) with all ``METRICS`` (PICP as a
+    fraction). ``dropout_p = None`` means each model's own training rate. Test sets are built
+    by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
+    """
+    from drfkit.study import studies
+
+    models = models if models is not None else studies.trained_models(P, study)
+    device = studies.pick_device(P.device)
+    rows = []
+    noise_levels = list(noise_levels)
+    for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
+        data = studies.study_data(P, study, "test", noise)
+        for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
+            results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
+                                           level=P.interval_level, device=device, seed=seed,
+                                           cache=predictions_dir(P.profile))
+            for p, m in zip(dropout_rates, results):
+                rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
+                             "dropout_p": model.default_dropout_p if p is None else float(p), **m})
+    return pd.DataFrame(rows)
+
+
+def calibration_points(P, study: str, noise_levels: Iterable[float], models: dict | None = None) -> pd.DataFrame:
+    """Calibration curves (expected vs observed quantile coverage), averaged over seeds.
+
+    Returns columns study, model, noise, expected, observed (mean over seeds), observed_sd.
+    """
+    from drfkit.study import studies
+
+    models = models if models is not None else studies.trained_models(P, study)
+    device = studies.pick_device(P.device)
+    rows = []
+    noise_levels = list(noise_levels)
+    for noise in steps(noise_levels, f"{study}: calibration at {len(noise_levels)} test levels"):
+        data = studies.study_data(P, study, "test", noise)
+        mask = None
+        if data.mask is not None:
+            mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
+        for (kind, seed), model in models.items():
+            pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.n_samples,
+                                        dropout_rates=[None], seed=seed, device=device)[0]
+            expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
+            rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,
+                      "observed": o} for e, o in zip(expected, observed)]
+    frame = pd.DataFrame(rows)
+    return (frame.groupby(["study", "model", "noise", "expected"], as_index=False)["observed"]
+            .agg(observed="mean", observed_sd="std"))

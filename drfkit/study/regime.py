@@ -1,0 +1,166 @@
+"""The noise-regime map: where along the noise axis does a learned filter help, and by how much
+against the true-physics bound?
+
+The book's protocol of each model kind (``drfkit.methods.protocols.regime_variant``) is trained at
+several max noise levels on the second ablation round's budget (``drfkit.study.ablation.train_variant``: the same
+data seeds, schedule and validation judgement as the ablation), then evaluated on a TEST split
+of its own (seed ``DATA_SEED + 2``, never read by training or selection) along the whole sweep
+of max noise and on a blackout set (the test split at max noise 0.5 with ``blackout_frames``
+pure noise). MAE is the MC-dropout mean's, as everywhere in the book. Beside every trained
+noise, the true-physics particle filter (``drfkit.methods.oracle.bound_on``) on that noise's
+no_dynamics estimates, calibrated on the validation split at its training noise.
+
+One JSON row file per (variant, seed) and per bound, under ``<out>/<budget>/regime/``, keyed
+by the run and every evaluation setting: a clean clone reads them without the models, and a
+changed setting retrains (or reloads) only what it needs.
+
+Shapes: the splits are ``load_pendulum`` arrays (images (N, T, 24, 24) uint8, targets (N, T, 2)).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+import pandas as pd
+
+from drfkit.study import ablation
+from drfkit.data.noise import Noise
+from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout
+from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary
+from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET
+from drfkit.methods.oracle import bound_on
+from drfkit.util.io import atomic_write_json, param_hash
+from drfkit.methods.predictions import cached_predict_rates
+from drfkit.util.progress import steps
+from drfkit.methods.protocols import ABLATION_BUDGETS, REGIME_BASES, regime_variant
+from drfkit.methods.train import load_checkpoint
+
+TEST_SEED = ablation.DATA_SEED + 2
+BLACKOUT_NOISE = 0.5  # the blackout set's frames outside the blackout, for every training noise
+
+
+def _test_sets(out, budget: dict, levels: Iterable[float], n_test: int) -> dict[Any, dict[str, np.ndarray]]:
+    """The regime's test splits: one per max noise level, and 'blackout'."""
+    cache = ablation.data_dir(out)
+    split = lambda level: load_pendulum(cache, "regime-test", n_test, budget["seq_len"], Noise("rkn_uniform", level), TEST_SEED)  # noqa: E731
+    sets: dict[Any, dict[str, np.ndarray]] = {float(level): split(level) for level in levels}
+    sets["blackout"] = with_blackout(split(BLACKOUT_NOISE), *blackout_frames(budget["seq_len"]),
+                                     seed=TEST_SEED + BLACKOUT_SEED_OFFSET)
+    return sets
+
+
+def _settings(levels, n_test: int, n_samples: int, extra: dict | None = None) -> dict[str, Any]:
+    return {"levels": [float(v) for v in levels], "n_test": int(n_test), "n_samples": int(n_samples),
+            "blackout_noise": BLACKOUT_NOISE, "test_seed": TEST_SEED, **(extra or {})}
+
+
+def _cached(path: Path, key: str) -> dict | None:
+    if path.exists():
+        row = json.loads(path.read_text())
+        if row.get("key") == key:
+            return row
+    return None
+
+
+def _model(name: str, seed: int, budget_name: str, out, progress: bool):
+    res, _ = ablation.train_variant(name, seed, budget_name, out, progress)
+    return load_checkpoint(res.best_path)
+
+
+def _mc_mean(model, arrays, n_samples: int, seed: int, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
+    pred = cached_predict_rates(model, arrays["images"], cache=cache, n_samples=n_samples, dropout_rates=[None],
+                                seed=seed, batch_size=256)[0]
+    return pred.mean.numpy(), pred.total.numpy()
+
+
+def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
+              cache: Path | None = None, progress: bool = False) -> dict[str, Any]:
+    """MAE of one (kind, training noise, seed) at every test level and on and through the blackout."""
+    name = regime_variant(kind, train_noise)
+    _, _, folder, run_key = ablation._run(name, seed, budget_name, out)
+    key = param_hash({"run": run_key, **_settings(levels, n_test, n_samples)}, 8)
+    path = folder / "regime" / f"{name}-seed{seed}.json"
+    if (row := _cached(path, key)) is not None:
+        return row
+    model = _model(name, seed, budget_name, out, progress)
+    row: dict[str, Any] = {"model": kind, "variant": name, "train_noise": float(train_noise), "seed": seed,
+                           "budget": budget_name, "key": key, "mae": {}}
+    for level, arrays in _test_sets(out, ABLATION_BUDGETS[budget_name], levels, n_test).items():
+        mean, _ = _mc_mean(model, arrays, n_samples, seed, cache)
+        per_frame = abs_error_per_frame(mean, arrays["targets"])
+        if level == "blackout":
+            row.update(blackout_summary(per_frame, blackout_frames(per_frame.size)))
+            row["mae_per_frame_blackout"] = [round(float(v), 5) for v in per_frame]
+        else:
+            row["mae"][f"{level:g}"] = float(per_frame.mean())
+    atomic_write_json(path, row)
+    return row
+
+
+def bound_row(train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
+              n_particles: int, cache: Path | None = None, progress: bool = False) -> dict[str, Any]:
+    """The true-physics bound on the no_dynamics of ``train_noise`` (σ scale and outlier weight
+    chosen on the validation split at that noise), at every test level and on the blackout."""
+    name = regime_variant("no_dynamics", train_noise)
+    budget, _, folder, run_key = ablation._run(name, seed, budget_name, out)
+    key = param_hash({"run": run_key, "n_particles": int(n_particles), **_settings(levels, n_test, n_samples)}, 8)
+    path = folder / "regime" / f"physics_bound-train{train_noise:g}-seed{seed}.json"
+    if (row := _cached(path, key)) is not None:
+        return row
+    model = _model(name, seed, budget_name, out, progress)
+    val = ablation._split(ablation.data_dir(out), budget, "val", train_noise)
+    table, curves = bound_on(lambda arrays: _mc_mean(model, arrays, n_samples, seed, cache), val,
+                             _test_sets(out, budget, levels, n_test), n_particles, seed)
+    sweep = table[table["noise"] != "blackout"]
+    per_frame = curves.sort_values("frame")["mae"].to_numpy()
+    row = {"model": "physics_bound", "variant": name, "train_noise": float(train_noise), "seed": seed,
+           "budget": budget_name, "key": key, "n_particles": int(n_particles),
+           "sigma_scale": float(table["sigma_scale"].iloc[0]), "outlier": float(table["outlier"].iloc[0]),
+           "mae": {f"{float(n):g}": float(m) for n, m in zip(sweep["noise"], sweep["mae"])},
+           **blackout_summary(per_frame, blackout_frames(per_frame.size)),
+           "mae_per_frame_blackout": [round(float(v), 5) for v in per_frame]}
+    atomic_write_json(path, row)
+    return row
+
+
+def regime_map(train_noises: Iterable[float], seeds: Iterable[int], budget_name: str, out, levels, n_test: int,
+               n_samples: int, n_particles: int, cache: Path | None = None, progress: bool = False) -> pd.DataFrame:
+    """Long table: one row per (train_noise, model, seed, test) with ``mae``; ``test`` is a max
+    noise level (as a string) or 'blackout' / 'after_blackout'; ``test_noise`` is its number
+    (NaN for the blackout rows). Models: every kind of ``REGIME_BASES`` and 'physics_bound'."""
+    rows = []
+    todo = [(tn, seed) for tn in train_noises for seed in seeds]
+    for train_noise, seed in steps(todo, "noise-regime map (training noise, seed)"):
+        found = [model_row(kind, train_noise, seed, budget_name, out, levels, n_test, n_samples, cache, progress)
+                 for kind in REGIME_BASES]
+        found.append(bound_row(train_noise, seed, budget_name, out, levels, n_test, n_samples, n_particles, cache,
+                               progress))
+        for row in found:
+            base = {"train_noise": float(train_noise), "model": row["model"], "seed": seed}
+            rows += [base | {"test": lv, "test_noise": float(lv), "mae": m} for lv, m in row["mae"].items()]
+            rows += [base | {"test": "blackout", "test_noise": np.nan, "mae": row["mae_blackout"]},
+                     base | {"test": "after_blackout", "test_noise": np.nan, "mae": row["mae_after_blackout"]}]
+    return pd.DataFrame(rows)
+
+
+def regime_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Seed-mean MAE per (train_noise, test) with a column per model, and two ratios: the DRF
+    over no_dynamics (< 1: the filter helps) and over the bound (how far from the limit)."""
+    wide = table.pivot_table(index=["train_noise", "test"], columns="model", values="mae", aggfunc="mean",
+                             sort=False)
+    wide["drf_over_no_dynamics"] = wide["drf"] / wide["no_dynamics"]
+    wide["drf_over_bound"] = wide["drf"] / wide["physics_bound"]
+    return wide.reset_index().rename_axis(columns=None)
+
+
+def profile_map(P, progress: bool = False) -> pd.DataFrame:
+    """``regime_map`` with a profile's settings (``regime_*``, the budget of the ablation round that chose
+    the book's protocol, ``ablation_round2_budget``, the sweep,
+    ``n_samples``, ``bound_particles``); rows under ``results/<profile>/ablation``."""
+    from drfkit.util.paths import predictions_dir, results_dir
+
+    return regime_map(P.regime_train_noise, P.regime_seeds, P.ablation_round2_budget, results_dir(P.profile, "ablation"),
+                      P.pend_sweep_max_noise, P.regime_test_sequences, P.n_samples, P.bound_particles,
+                      cache=predictions_dir(P.profile), progress=progress)
