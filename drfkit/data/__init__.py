@@ -8,13 +8,9 @@ inside drfkit, import from the defining module (``from drfkit.data.pendulum impo
 """
 from __future__ import annotations
 
-import importlib
+from drfkit.util.lazy import lazy_modules
 
 __all__ = ['drawing', 'noise', 'nuscenes', 'nuscenes_tables', 'pedestrians', 'pendulum', 'pifpaf', 'records',
            'sim_detector', 'sim_world']
 
-
-def __getattr__(name: str):
-    if name in __all__:
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_modules(__name__, __all__)

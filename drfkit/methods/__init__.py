@@ -9,12 +9,8 @@ inside drfkit, import from the defining module (``from drfkit.methods.diagnostic
 """
 from __future__ import annotations
 
-import importlib
+from drfkit.util.lazy import lazy_modules
 
 __all__ = ['diagnostics', 'gating', 'objectives', 'oracle', 'predictions', 'protocols', 'timing', 'train', 'uncertainty']
 
-
-def __getattr__(name: str):
-    if name in __all__:
-        return importlib.import_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_modules(__name__, __all__)

@@ -11,7 +11,7 @@
 #   F_t and Q_t, a Kalman predict/update step fuses the latent observation w_t with the prior,
 #   and the decoder reads the posterior [z_t, diag P_t].
 #
-# All three are trained with the book's one training loop (`drfkit.train`): Gaussian NLL
+# All three are trained with the book's one training loop (`drfkit.methods.train`): Gaussian NLL
 # averaged over every frame of a sequence (the paper's loss), Adam, gradient clipping at norm
 # 10, the best checkpoint on validation NLL, a checkpoint every epoch from which an interrupted
 # run resumes. The paper's schedule is Adam 1e-4 for 200 epochs; it does not state the batch
@@ -19,7 +19,7 @@
 # `pend_patience` (ours) ends a run that many epochs after its best validation NLL; 0, the paper
 # profile's value, trains every epoch. The paper runs first trained with patience 50 and were then
 # continued from their last checkpoints to the full 200 epochs
-# (`python -m drfkit.studies --profile paper --study pendulum --models M --seeds N --set pend_patience=0`);
+# (`python -m drfkit train --profile paper --study pendulum --models M --seeds N --set pend_patience=0`);
 # no selected checkpoint changed. Where a run was trained (CPU, or a GPU when one was lent) is recorded
 # per epoch in the training curves.
 
@@ -109,20 +109,20 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # %% [markdown]
 # ## Speed of training
 # One optimisation step (forward, loss, backward) of each model on the same batch of 50 × T frames,
-# measured in one run in interleaved rounds (`drfkit.timing.training_step_times`: each round times
+# measured in one run in interleaved rounds (`drfkit.methods.timing.training_step_times`: each round times
 # every model in turn, so a slow spell of the machine hits all of them); seconds per epoch follow
 # from the number of batches, and `ratio_to_no_dynamics` is the median of the per-round ratios
 # (at least 15 rounds; `ratio_to_no_dynamics_iqr` is their interquartile range). The target is a
 # DRF epoch at most 1.5× a no_dynamics epoch, at the notebook's thread count. A rerun on the same
 # machine with the same code reuses these timings and the deterministic studies below
-# (`drfkit.measurements`: each cell says when it measured; `make reproduce REMEASURE=1` measures
+# (`drfkit.book.measurements`: each cell says when it measured; `make reproduce REMEASURE=1` measures
 # again). In training the DRF's
 # recursion runs as one autograd node with a hand-written backward (`drfkit.models.recursion`; the
 # tests check it against autograd); `drf_per_step` is the same model differentiated step by step
 # by autograd, for comparison.
 #
 # A time ratio mixes two things: how much arithmetic each step does, and how fast it runs. So each
-# step's arithmetic is also counted (`drfkit.timing.count_flops`: the matrix products and
+# step's arithmetic is also counted (`drfkit.methods.timing.count_flops`: the matrix products and
 # convolutions of forward and backward, as `torch.utils.flop_counter` counts them, and the CPU
 # LSTM layer by a formula drfkit adds; not the filter's Cholesky factor and inverse, nor
 # elementwise ops, so `gflop` is a lower bound of the work). `flop_ratio_to_no_dynamics`
@@ -161,8 +161,8 @@ speed
 # ### Whole epochs
 # The target is stated per epoch, and an epoch is more than its steps: batching the uint8 images,
 # clipping and Adam, the validation loss (the DRF's through its per-step inference loop) and two
-# checkpoint writes. `drfkit.timing.epoch_times` trains a fresh model of each kind for one whole
-# epoch with the training loop itself (`drfkit.train.train_model`, checkpoints into a temporary
+# checkpoint writes. `drfkit.methods.timing.epoch_times` trains a fresh model of each kind for one whole
+# epoch with the training loop itself (`drfkit.methods.train.train_model`, checkpoints into a temporary
 # folder), in an order rotated per round, three rounds; the ratio is again the median of the
 # per-round ratios.
 
@@ -180,7 +180,7 @@ epochs
 # ### Per-call cost or arithmetic?
 # The recursion runs hundreds of small ops per filter step, so part of its time is the cost of
 # issuing them (interpreter, dispatcher, LAPACK's per-call setup) and does not grow with the batch.
-# `drfkit.timing.recursion_scaling` times the recursion alone (forward and backward) at half, one
+# `drfkit.methods.timing.recursion_scaling` times the recursion alone (forward and backward) at half, one
 # and two times the batch, in the same interleaved run as a training step of each model, and fits
 # a line t(b) = fixed + per-sequence · b. Its intercept is the per-call cost; its slope the work of
 # one more sequence with torch's kernels as they run now. `floor_ratio` removes the intercept from
@@ -260,7 +260,7 @@ plt.show()
 # %% [markdown]
 # ## Does the filter filter?
 # A verdict on the DRF is only worth something if its Kalman machinery does what the method is
-# about. Four checks (`drfkit.diagnostics`, deterministic pass, test split at the largest evaluated
+# about. Four checks (`drfkit.methods.diagnostics`, deterministic pass, test split at the largest evaluated
 # noise and the blackout test set, where frames 30–44 of every sequence are pure noise):
 #
 # * `r_noise_spearman` — rank correlation of the observation variance r (mean over observed latent
@@ -292,7 +292,7 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # %% [markdown]
 # ## The limit: a filter that knows the physics
 # **These references use knowledge no learned model has.** The *true-physics bound* is a causal
-# particle filter with the generator's own equations (`drfkit.oracle`: θ'' = −c sin θ − 0.1 θ',
+# particle filter with the generator's own equations (`drfkit.methods.oracle`: θ'' = −c sin θ − 0.1 θ',
 # velocity noise N(0, 0.1²) per frame, start at rest), fed each no_dynamics seed's per-frame
 # estimates of (cos θ, sin θ) and their σ; the σ scale and an outlier weight are chosen on the
 # validation split at the training noise only. It is what a filter could reach from the same
@@ -377,13 +377,13 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 
 # %% [markdown]
 # ## Which protocol makes the DRF filter? An ablation on validation data
-# The paper leaves open much of how the DRF is trained. Each variant of `drfkit.protocols`
+# The paper leaves open much of how the DRF is trained. Each variant of `drfkit.methods.protocols`
 # changes one lever (or a combination) and is trained on a small budget (`ablation_budget`), then
 # judged on the **validation** split only — at the training noise, at 0.75 and 1.0, with a
 # blackout — with the same mechanism checks as above. The baselines are trained under the same
 # protocols, so a gain that any sequence model would get shows up in theirs too. Every variant
 # tried stays in the table. Rows are cached under `results/<profile>/ablation/`; the command
-# behind them: `python -m drfkit.ablation --budget <ablation_budget> --out results/<profile>/ablation
+# behind them: `python -m drfkit ablation --budget <ablation_budget> --out results/<profile>/ablation
 # --variants ... --seeds ...` (one thread per run; two such processes on two cores). This notebook
 # trains the rows `ablation_variants` × `ablation_seeds` that are missing and shows every finished row
 # of the budget (in the paper profile, the single levers were run at seed 0 by that command).
@@ -421,7 +421,7 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # on one fixed draw of the training noise. Under that loss the training NLL keeps falling while the
 # validation MAE of the mean doubles, clean frames included: the network learns a small σ where
 # frames are easy and then barely fits the mean elsewhere (the gradient in μ is (μ − y)/σ²). The
-# second round changes how the models are *fit* (`drfkit.objectives`, `drfkit.train.TrainConfig`):
+# second round changes how the models are *fit* (`drfkit.methods.objectives`, `drfkit.methods.train.TrainConfig`):
 # β-NLL with β = 1 (the mean gets the gradient of ½(y − μ)², σ still learns the spread), the
 # training noise redrawn on the fixed clean frames every epoch, cosine decay of the learning rate,
 # random 25-frame windows, the checkpoint selected on the validation MAE; each `fit_*` variant
@@ -430,7 +430,7 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # three filter levers: a split decoder (the mean from z alone, σ from P alone, as the RKN's), a loss on
 # the one-step prior z_{t|t−1} as well as the posterior (so the transition must predict), and a
 # constant learned Q. Data: the benchmark's own frames, validation split only. Rows are cached under
-# `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit.ablation --budget
+# `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit ablation --budget
 # fit --out results/<profile>/ablation --variants ... --seeds 0 1 --threads 1`.
 
 # %%
@@ -468,12 +468,12 @@ ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.ablation_round
 # ## The noise-regime map: where does a learned filter help?
 # The paper trains at max noise 0.5 and calls 0.75 out of distribution. How the benefit of a
 # recursive filter depends on the noise regime is a separate question: the book's protocol of each
-# model (`drfkit.protocols.regime_variant`) is trained at every `regime_train_noise` on the ablation's
+# model (`drfkit.methods.protocols.regime_variant`) is trained at every `regime_train_noise` on the ablation's
 # budget, and evaluated on a **test split of its own** (a seed no training or selection reads) along
 # the whole sweep of max noise and on the blackout set, beside the true-physics bound on that
 # training noise's no_dynamics (calibrated on validation at its training noise). Small budget, so the
 # numbers compare regimes, not the paper-scale runs above. Rows are cached under
-# `results/<profile>/ablation/<budget>/regime/`; `python -m drfkit.regime --profile <profile>`
+# `results/<profile>/ablation/<budget>/regime/`; `python -m drfkit regime --profile <profile>`
 # trains and evaluates what is missing.
 
 # %%
@@ -499,11 +499,11 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 
 # %% [markdown]
 # ## Both protocols side by side
-# The paper's protocol (the models above) and the book's (`drfkit.protocols`: the second round's
+# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the second round's
 # choice for the DRF, the same recipe and training data for the LSTM and no_dynamics, each on the
 # book's schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
 # the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
-# here; `python -m drfkit.studies --profile paper --study pendulum --protocol book --threads 1`
+# here; `python -m drfkit train --profile paper --study pendulum --protocol book --threads 1`
 # trains (or resumes) its runs.
 
 # %%

@@ -140,7 +140,7 @@ for r in comparison.itertuples():
 # ## The limit: a filter with the motion model, and a blackout
 # **This reference uses knowledge the learned models do not have**: that a person's depth changes
 # at a nearly constant rate between keyframes (constant velocity, white-acceleration noise for the
-# walkers' turns and the ego car's drift; `drfkit.oracle.constant_velocity_filter`). Fed each no_dynamics
+# walkers' turns and the ego car's drift; `drfkit.methods.oracle.constant_velocity_filter`). Fed each no_dynamics
 # seed's per-frame depths and σ (scale and acceleration noise chosen on the validation scenes at
 # p = 0.01), it shows what filtering the same per-frame estimates could give. The *blackout* removes
 # the detections of frames 4–6 of every full window (keypoints zeroed, confidence 0): the bound is told

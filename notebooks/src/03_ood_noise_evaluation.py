@@ -13,9 +13,9 @@
 # * as mean and 95 % Student-t interval over seeds (mean ± t₀.₉₇₅,ₙ₋₁ · sd / √n).
 #
 # It then redraws each of the paper's result figures from our numbers with the paper's published
-# values beside them, and turns claims C1–C5 into computed verdicts (`drfkit.claims`).
+# values beside them, and turns claims C1–C5 into computed verdicts (`drfkit.study.claims`).
 # No threshold or model choice here looks at the test sets: models were selected on validation NLL.
-# The pendulum is evaluated under every training protocol of `pend_protocols` (`drfkit.protocols`:
+# The pendulum is evaluated under every training protocol of `pend_protocols` (`drfkit.methods.protocols`:
 # the paper's as written, and the book's, under which the DRF's filter is checked to filter in
 # notebook 01); C1, C2 and C5 get a verdict per protocol. The book's protocol changes the pendulum
 # only, so the pedestrians are one set of models, judged once (protocol `paper`).
@@ -157,7 +157,7 @@ for group in groups:
 
 # %% [markdown]
 # ## Claims C1–C5, with computed verdicts
-# Each rule is written in the table next to its verdict (`drfkit.claims`); the timing (C6) and
+# Each rule is written in the table next to its verdict (`drfkit.study.claims`); the timing (C6) and
 # gating (C7) rows are added by notebooks 04 and 05. C1 and C2 need the pendulum, C3 and C4 the
 # pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated, over the same
 # PICP–MPIW curves as C2. C1, C2 and C5 are judged once per pendulum protocol (C5 with the one set of
@@ -198,7 +198,7 @@ table[table["id"].str.startswith("C")][["id", "protocol", "claim", "paper", "our
 
 # %% [markdown]
 # ### What these verdicts say
-# Written from the claims table above (`drfkit.claims.reading`), so it changes with the results. Where
+# Written from the claims table above (`drfkit.study.claims.reading`), so it changes with the results. Where
 # each claim's evidence lies (this notebook's sections, the tables and figures): `results/<profile>/claims.md`.
 
 # %%

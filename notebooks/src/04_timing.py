@@ -47,7 +47,7 @@
 # The pendulum has no Monoloco: there its ratios are to each model's own `no_sampling` pass.
 #
 # **Reruns.** A measurement made on this machine with the same code and parameters is reused
-# (`drfkit.measurements`: the cell says so and when it was measured); `make reproduce REMEASURE=1`
+# (`drfkit.book.measurements`: the cell says so and when it was measured); `make reproduce REMEASURE=1`
 # or `make bench` measures again.
 
 # %% tags=["parameters"]

@@ -4,7 +4,7 @@
 # The paper's discussion proposes the Kalman gain as a measure of the network's competency:
 # compute the expensive epistemic uncertainty (MC dropout) only on frames where competency is
 # low, and report PICP, MPIW and time for four settings on both studies (its last table).
-# This notebook implements that idea as `drfkit.gating` and checks it (claim C7).
+# This notebook implements that idea as `drfkit.methods.gating` and checks it (claim C7).
 #
 # **Competency score.** With an identity observation model the DRF's update has gain
 # K_t = P⁻_t (P⁻_t + R_t)⁻¹. Its mean diagonal k_t = mean_i K_t[i,i] is near 1 when the filter
@@ -31,7 +31,7 @@
 # exceeds the threshold, one deterministic pass on the others); *random* (as many frames as the
 # Kalman-gain gate selects on this test set, drawn uniformly, seeded: equal compute).
 # Only the DRF has a filter, hence gains: the table covers the DRF models of every seed, and on the
-# pendulum of every training protocol in `pend_protocols` (`drfkit.protocols`; notebook 01 checks
+# pendulum of every training protocol in `pend_protocols` (`drfkit.methods.protocols`; notebook 01 checks
 # that the book protocol's gain follows frame quality, which is what the gate reads). The book's
 # protocol changes the pendulum only: the pedestrians are one set of models (protocol `paper`).
 #
@@ -41,7 +41,7 @@
 # threshold are assembled per frame from one deterministic and one always-dropout pass over the test
 # set (`gating.assemble`): Kalman-gain and random gating then differ only in the frames they pick,
 # not in their dropout draws. Times are measured with `torch.utils.benchmark`'s clock in interleaved rounds
-# (medians; `drfkit.timing.interleaved_times`), in the same run, per real frame, on one batch of
+# (medians; `drfkit.methods.timing.interleaved_times`), in the same run, per real frame, on one batch of
 # evenly spaced test sequences holding about `gating_timing_frames` real frames (the
 # `timed_frames` column; 0 = all); PICP, MPIW and NLL always use every test sequence.
 # Per-frame times of a batch this large do not depend on its size, and timing every setting and
@@ -87,7 +87,7 @@ torch.set_num_threads(P.threads or 1)
 # ## Gates fitted on validation data, evaluated on the test sets
 # Trained models come from the shared cache (`studies.trained_models`: trained on first use). The
 # study times the settings, so a rerun on the same machine with the same code and parameters reuses
-# its last run (`drfkit.measurements`; `make reproduce REMEASURE=1` measures again).
+# its last run (`drfkit.book.measurements`; `make reproduce REMEASURE=1` measures again).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
