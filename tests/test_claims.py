@@ -326,3 +326,14 @@ def test_c7_judges_the_training_noise_gate_and_labels_the_other_as_reference():
     assert row["ours"].startswith("gate tuned at the training noise: ")
     assert "for reference, gate tuned at the test noise: " in row["ours"] and "gates 50% of frames" in row["ours"]
     assert claims.c7_gating(ood, "pendulum", ood_tuned=trained)["verdict"] == claims.REPRODUCED
+
+
+def test_monoloco_inputs_reading_splits_the_gap_by_its_share():
+    def rows(mono, fed, nd):
+        return pd.DataFrame({"model": ["monoloco", "monoloco_detected_inputs", "no_dynamics"] * 2,
+                             "noise": [0.01] * 3 + [0.05] * 3, "mae": [mono, fed, nd, 9.0, 9.0, 9.0]})
+    inputs = claims.monoloco_inputs_reading(rows(1.4, 0.9, 0.8), 0.01)
+    assert inputs["share"] == pytest.approx(5 / 6) and "mostly its published inputs" in inputs["text"]
+    network = claims.monoloco_inputs_reading(rows(1.4, 1.3, 0.8), 0.01)
+    assert network["share"] == pytest.approx(1 / 6) and "not its inputs" in network["text"]
+    assert "no handicap" in claims.monoloco_inputs_reading(rows(0.7, 0.9, 0.8), 0.01)["text"]

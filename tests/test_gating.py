@@ -158,15 +158,18 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     monkeypatch.setattr(gating, "choose_direction", record_direction)
     monkeypatch.setattr(gating, "choose_threshold", record_threshold)
-    from drfkit.study import studies
-
     served = []
 
     def fake_data(P, split, noise=None, protocol="paper"):
         served.append((split, noise))
         return val if split == "val" else test
 
-    monkeypatch.setattr(studies, "pedestrian_data", fake_data)
+    import dataclasses
+
+    from drfkit.study import registry
+
+    # the study's data is its registry entry's callable
+    monkeypatch.setitem(registry.STUDIES, "pedestrians", dataclasses.replace(registry.STUDIES["pedestrians"], data=fake_data))
     P = SimpleNamespace(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
                         gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95)
     out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},

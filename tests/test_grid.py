@@ -96,24 +96,29 @@ def assert_same_checkpoints(ours: Path, theirs: Path, names=None):
 
 
 def _stem(profile, kind, seed):
-    return studies.checkpoint_stem(grid.study_params(studies, load_profile(profile), "pendulum"), "pendulum", kind, seed)
+    return studies.checkpoint_stem(grid.study_params(load_profile(profile), "pendulum"), "pendulum", kind, seed)
 
 
 # ------------------------------------------------------------------------- without a cluster
 def test_grid_runs_are_every_study_protocol_model_and_seed_of_the_profile():
     values = load_profile("quick")
-    runs = grid.grid_runs(studies, values)
-    # pendulum: 2 protocols x 3 models x 2 seeds; pedestrians: the paper's protocol x 4 models x 2 seeds
-    assert len(runs) == 12 + 8 and len(set(runs)) == len(runs)
-    assert {r.protocol for r in runs if r.study == "pedestrians"} == {"paper"}
-    assert grid.grid_runs(studies, values, ["pendulum"], ["lstm"], [1], "book") == [grid.Run("pendulum", "book", "lstm", 1)]
-    assert {r.study for r in grid.grid_runs(studies, values, None, ["monoloco"])} == {"pedestrians"}
-    assert {r.study for r in grid.grid_runs(studies, values, None, None, None, "book")} == {"pendulum"}
+    runs = grid.grid_runs(values)
+    # pendulum: 2 protocols x 3 models x 2 seeds; pedestrians: 2 protocols x 4 models x 2 seeds, but Monoloco
+    # trains one set of runs under both (its published schedule), so its book runs are not tasks again
+    assert len(runs) == 12 + 8 + 6 and len(set(runs)) == len(runs)
+    assert {r.kind for r in runs if r.study == "pedestrians" and r.protocol == "book"} == {"drf", "no_dynamics", "lstm"}
+    assert grid.grid_runs(values, ["pendulum"], ["lstm"], [1], "book") == [grid.Run("pendulum", "book", "lstm", 1)]
+    assert {r.study for r in grid.grid_runs(values, None, ["monoloco"])} == {"pedestrians"}
+    assert {r.study for r in grid.grid_runs(values, None, None, None, "book")} == {"pendulum", "pedestrians"}
+    one_protocol = values | {"ped_protocols": ["paper"]}
     for bad, message in ((dict(studies=["pendulum"], kinds=["monoloco"]), "not models of the pendulum"),
                          (dict(seeds=[7]), "not among the profile's seeds"),
-                         (dict(studies=["pedestrians"], protocol="book"), "only the paper's protocol")):
+                         (dict(studies=["pedestrians"], protocol="blackout"), "not a protocol the pedestrians")):
         with pytest.raises(ParameterError, match=message):
-            grid.grid_runs(studies, values, **bad)
+            grid.grid_runs(values, **bad)
+    with pytest.raises(ParameterError, match="not a protocol the pedestrians study trains in this profile"):
+        grid.grid_runs(one_protocol, ["pedestrians"], protocol="book")
+    assert {r.study for r in grid.grid_runs(one_protocol, None, None, None, "book")} == {"pendulum"}
 
 
 def test_scheduler_argument():
@@ -176,7 +181,7 @@ def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny
                                                                             capsys):
     from drfkit.methods.train import train_model
 
-    P = grid.study_params(studies, load_profile(tiny), "pendulum")
+    P = grid.study_params(load_profile(tiny), "pendulum")
     torch.set_num_threads(1)
     # one run finished, one cut short after its first epoch, both by the sequential code
     assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",

@@ -292,6 +292,26 @@ def test_monoloco_sampling_keeps_batchnorm_in_eval_and_modes_agree():
     assert torch.equal(zero_sigma, eval_sigma.expand(3, -1, -1, -1))
 
 
+def test_monoloco_fed_the_drf_familys_inputs_reads_exactly_what_their_encoder_reads():
+    from drfkit.models.parts import keypoint_features
+
+    torch.manual_seed(0)
+    kp = torch.cat([torch.randn(2, 3, 17, 2), torch.rand(2, 3, 17, 1)], dim=-1)
+    kp[0, 1, 4:9, 2] = 0.0  # missed keypoints
+    model = build_model({"kind": "monoloco", "input_kind": "keypoints", "out_dim": 1, "inputs": "detected"}).eval()
+    h, _ = model.features(kp)
+    assert h.shape == (2, 3, 53) and torch.equal(h, keypoint_features(kp))
+    assert torch.equal(h[0, 1, 8:18], torch.zeros(10))  # missed keypoints are 0, not their placeholders
+    encoder = make("no_dynamics", "keypoints").encoder
+    assert torch.allclose(encoder(kp), encoder.net(h))  # the family's encoder reads the same 53 numbers
+    assert model.input_layer.in_features == 53 and model.config["inputs"] == "detected"
+    mean, sigma = model(kp)
+    assert mean.shape == sigma.shape == (2, 3, 1)
+    assert "inputs" not in make("monoloco", "keypoints").config  # the published model's name is unchanged
+    with pytest.raises(ValueError, match="inputs must be one of"):
+        build_model({"kind": "monoloco", "input_kind": "keypoints", "out_dim": 1, "inputs": "raw"})
+
+
 def test_monoloco_rejects_other_inputs():
     with pytest.raises(ValueError, match="keypoints"):
         build_model({"kind": "monoloco", "input_kind": "pendulum", "out_dim": 2})

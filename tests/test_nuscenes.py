@@ -38,7 +38,7 @@ from drfkit.data.nuscenes_tables import (
     read_tables,
 )
 from drfkit.data.pifpaf import box_iou, enlarge_boxes, match_boxes, prediction_file_candidates, read_predictions
-from drfkit.data.pedestrians import load_pedestrians
+from drfkit.study.pedestrian_runs import load_pedestrians
 from drfkit.data.sim_detector import simulate_records
 from drfkit.data.sim_world import simulate_truth
 from drfkit.data.records import RECORD_FIELDS, check_records

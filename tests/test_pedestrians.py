@@ -4,7 +4,7 @@ import pytest
 
 from drfkit.data.noise import Noise
 from drfkit.data.drawing import _background, draw_skeletons, render_frame
-from drfkit.data.pedestrians import load_pedestrians
+from drfkit.study.pedestrian_runs import load_pedestrians
 from drfkit.data.sim_detector import DetectorConfig, detect, simulate_records
 from drfkit.data.sim_world import CAM_FRONT_INTRINSICS, IMAGE_HEIGHT, IMAGE_WIDTH, simulate_truth
 from drfkit.data.records import (

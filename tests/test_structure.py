@@ -165,7 +165,7 @@ def test_longest_import_chain_does_not_grow():
 
 
 def test_every_registered_study_is_wired_end_to_end():
-    """Each entry of drfkit.study.registry names data functions that exist, profile keys the schema
+    """Each entry of drfkit.study.registry holds callables for its data and runs, profile keys the schema
     knows (and its training notebook accepts), a training notebook, and model kinds that build."""
     from drfkit.study import studies
     from drfkit.models import MODEL_CLASSES
@@ -174,9 +174,10 @@ def test_every_registered_study_is_wired_end_to_end():
     from drfkit.study.registry import STUDIES
 
     for name, s in STUDIES.items():
-        assert callable(getattr(studies, s.data)) and callable(getattr(studies, s.data_key)), name
+        assert all(callable(f) for f in (s.data, s.data_key, s.model_options, s.train_config, s.fresh_training)), name
+        assert "paper" in s.all_protocols, name
         assert s.training_notebook in NOTEBOOKS, name
-        keys = [s.models_key, s.train_level_key, s.eval_levels_key, s.sweep_key] + ([s.protocols_key] if s.protocols_key else [])
+        keys = [s.models_key, s.train_level_key, s.eval_levels_key, s.sweep_key, s.protocols_key]
         assert all(k in SPECS for k in keys), (name, [k for k in keys if k not in SPECS])
         assert all(k in NOTEBOOKS[s.training_notebook] for k in (s.models_key, s.train_level_key)), name
         assert set(s.kinds) <= set(MODEL_CLASSES), name

@@ -3,7 +3,7 @@ long profile can be spread over processes or sessions."""
 import pytest
 
 from drfkit.book import train_runs
-from drfkit.study import studies
+from drfkit.study import pedestrian_runs, studies
 from drfkit.study.params import load_profile, notebook_params, validate, write_profile
 
 
@@ -83,14 +83,34 @@ def test_monoloco_trains_on_its_published_schedule_and_the_family_on_the_profile
     assert (mono.epochs, mono.lr, mono.batch_size) == (P.monoloco_epochs, P.monoloco_lr, P.monoloco_batch_size)
     drf = studies.train_config(P, "pedestrians", "drf", 0)
     assert (drf.grad_clip, drf.select_on, drf.lr_step, drf.lr) == (10.0, "loss", None, P.ped_lr)
+    # the book's protocol: the DRF family on beta-NLL with cosine decay, selected on the validation MAE;
+    # Monoloco on its published schedule in every protocol, so its runs are one set
+    book = studies.train_config(P, "pedestrians", "lstm", 0, "book")
+    assert (book.objective, book.beta, book.lr_schedule, book.select_on) == ("beta_nll", 1.0, "cosine", "l1")
+    assert (book.epochs, book.lr, book.batch_size) == (P.ped_epochs, P.ped_lr, P.ped_batch_size)
+    assert studies.train_config(P, "pedestrians", "monoloco", 0, "book") == mono
+    assert studies.checkpoint_stem(P, "pedestrians", "monoloco", 1, "book") == \
+        studies.checkpoint_stem(P, "pedestrians", "monoloco", 1)
+    assert studies.checkpoint_stem(P, "pedestrians", "drf", 0, "book") != studies.checkpoint_stem(P, "pedestrians", "drf", 0)
+    with pytest.raises(ValueError, match="no training protocol 'blackout'.*'paper', 'book'"):
+        studies.train_config(P, "pedestrians", "drf", 0, "blackout")
+
+
+def test_a_diagnostic_variant_has_its_own_name_and_the_published_model_keeps_its_own(tiny_profile):
+    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile)))
+    published = studies.model_config("pedestrians", "monoloco", P)
+    detected = studies.model_config("pedestrians", "monoloco", P, options={"inputs": "detected"})
+    assert "inputs" not in published and detected == published | {"inputs": "detected"}
+    assert studies.checkpoint_stem(P, "pedestrians", "monoloco", 0, options={"inputs": "detected"}) != \
+        studies.checkpoint_stem(P, "pedestrians", "monoloco", 0)
 
 
 def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatch):
     P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile))
                  | {"ped_n_scenes": 4, "ped_frames_per_scene": 4, "ped_data_seed": 77})
     reads = []
-    real = studies.pedestrian_data
-    monkeypatch.setattr(studies, "pedestrian_data", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
+    real = pedestrian_runs.pedestrian_data
+    monkeypatch.setattr(pedestrian_runs, "pedestrian_data", lambda *a, **k: reads.append(a[1]) or real(*a, **k))
     first = studies.target_statistics(P)
     assert studies.target_statistics(P) == first and reads == ["train"]
     assert first["target_scale"] > 0
@@ -145,9 +165,11 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pend_book_epochs, P.pend_book_lr, P.pend_book_batch_size)
     assert studies.train_config(P, "pendulum", "lstm", 0, "book").prior_weight == 0.0
     assert studies.train_config(P, "pendulum", "drf", 0, "paper").objective == "model"
-    fresh = studies.fresh_training(P, "book")
+    fresh = studies.fresh_training(P, "pendulum", "book")
     a, b, a2 = fresh(0), fresh(1), fresh(0)
     assert not np.array_equal(a.inputs.numpy(), b.inputs.numpy()) and np.array_equal(a.inputs.numpy(), a2.inputs.numpy())
     assert np.array_equal(a.targets.numpy(), studies.pendulum_data(P, "train", protocol="book").targets.numpy())
-    assert studies.fresh_training(P, "paper") is None
-    assert studies._pendulum_data_key(P, "book")["fresh_noise"] is True and "fresh_noise" not in studies._pendulum_data_key(P)
+    assert studies.fresh_training(P, "pendulum", "paper") is None
+    assert studies.fresh_training(P, "pedestrians", "book") is None
+    assert studies.study_data_key(P, "pendulum", "book")["fresh_noise"] is True
+    assert "fresh_noise" not in studies.study_data_key(P, "pendulum")

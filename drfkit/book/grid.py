@@ -14,8 +14,7 @@ after ``drfkit.util.device.setup(threads, ...)`` as ``python -m drfkit train`` d
 checkpoint files, the same OS lock per checkpoint stem, the same resume, so a run's numbers equal a
 sequential run's with the same thread count. Dask only decides where and when each run trains.
 
-``S`` below is the ``drfkit.study.studies`` module, passed in by its command line (and the pipeline's):
-it imports this module, so this one does not import it back.
+What a run is -- its data, configuration and checkpoint name -- comes from ``drfkit.study.studies``.
 """
 from __future__ import annotations
 
@@ -28,6 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from drfkit.study import registry
+from drfkit.study import studies as runs_of
 from drfkit.study.params import ParameterError
 
 
@@ -50,9 +50,9 @@ class Run:
 
 
 # ------------------------------------------------------------------------------ the grid
-def study_params(S, values: dict[str, Any], study: str):
+def study_params(values: dict[str, Any], study: str):
     """The validated parameters of ``study``'s training notebook from a profile's values."""
-    return notebook_values(values, S.TRAINING_NOTEBOOK[study])
+    return notebook_values(values, runs_of.TRAINING_NOTEBOOK[study])
 
 
 def notebook_values(values: dict[str, Any], notebook: str):
@@ -66,36 +66,39 @@ def study_protocols(P, study: str) -> list[str]:
     return registry.study(study).protocols(P)
 
 
-def grid_runs(S, values: dict[str, Any], studies: Iterable[str] | None = None, kinds: list[str] | None = None,
+def grid_runs(values: dict[str, Any], studies: Iterable[str] | None = None, kinds: list[str] | None = None,
               seeds: list[int] | None = None, protocol: str | None = None) -> list[Run]:
     """Every run of the profile, filtered as the command line says; ``ParameterError`` for a
     filter that names nothing the notebooks would train."""
-    studies = list(studies or sorted(S.STUDIES))
+    studies = list(studies or sorted(runs_of.STUDIES))
     runs, known_models = [], set()
     for study in studies:
-        P = study_params(S, values, study)
+        P = study_params(values, study)
         if set(seeds or []) - set(P.seeds):
             raise ParameterError(f"--seeds {sorted(set(seeds) - set(P.seeds))} are not among the "
                                  f"profile's seeds {P.seeds}; the notebooks would never use them")
-        models = S.study_models(P, study)
+        models = runs_of.study_models(P, study)
         known_models |= set(models)
         if len(studies) == 1 and set(kinds or []) - set(models):
             raise ParameterError(f"--models {sorted(set(kinds) - set(models))} are not models of the {study} "
                                  f"study in this profile; choose from {models}")
         if protocol is None:
             protocols = study_protocols(P, study)
-        elif study == "pedestrians" and protocol != "paper":
+        elif protocol not in study_protocols(P, study):
             if len(studies) == 1:
-                raise ParameterError(f"the pedestrian study has only the paper's protocol so far, got {protocol!r}")
+                raise ParameterError(f"--protocol {protocol!r} is not a protocol the {study} study trains in this "
+                                     f"profile; choose from {study_protocols(P, study)}")
             continue
         else:
             protocols = [protocol]
-        for proto in protocols:
+        for i, proto in enumerate(protocols):
             for kind in models:
                 if kinds and kind not in kinds:
                     continue
                 for seed in P.seeds:
-                    if not seeds or seed in seeds:
+                    # a run that an earlier protocol trains already (one checkpoint) is one task
+                    if (not seeds or seed in seeds) and not any(
+                            runs_of.shared_run(P, study, kind, seed, proto, earlier) for earlier in protocols[:i]):
                         runs.append(Run(study, proto, kind, seed))
     if set(kinds or []) - known_models:
         raise ParameterError(f"--models {sorted(set(kinds) - known_models)} are not models of the studies "
@@ -103,21 +106,21 @@ def grid_runs(S, values: dict[str, Any], studies: Iterable[str] | None = None, k
     return runs
 
 
-def run_finished_on_disk(S, P, run: Run) -> bool:
+def run_finished_on_disk(P, run: Run) -> bool:
     """Whether ``run``'s checkpoints are complete (a task would be a cache hit). A partial, corrupt
     or differently configured run counts as missing: its task resumes it or reports why it cannot."""
     from drfkit.util.io import CorruptArtefactError, param_hash, torch_load_checked
     from drfkit.methods.train import fingerprint, run_finished
 
-    stem = S.checkpoint_stem(P, run.study, run.kind, run.seed, run.protocol)
+    stem = runs_of.checkpoint_stem(P, run.study, run.kind, run.seed, run.protocol)
     last, best = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
     if not (last.exists() and best.exists()):
         return False
     try:
         state = torch_load_checked(last)
-        cfg = S.train_config(P, run.study, run.kind, run.seed, run.protocol)
-        fp = fingerprint(S.model_config(run.study, run.kind, P, run.protocol), cfg,
-                         param_hash(S.study_data_key(P, run.study, run.protocol)))
+        cfg = runs_of.train_config(P, run.study, run.kind, run.seed, run.protocol)
+        fp = fingerprint(runs_of.model_config(run.study, run.kind, P, run.protocol), cfg,
+                         param_hash(runs_of.study_data_key(P, run.study, run.protocol)))
         return state.get("fingerprint") == fp and run_finished(state["epoch"], state["best_epoch"], cfg)
     except (CorruptArtefactError, KeyError, TypeError, AttributeError):  # the task says what is wrong
         return False
@@ -228,7 +231,7 @@ class _Connection:
                 logger.removeFilter(quiet)
 
 
-def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads: int,
+def run_grid(values: dict[str, Any], runs: list[Run], scheduler: str, threads: int,
              out: Callable[[str], None] = print, write_curves: bool = False) -> dict[Run, Any]:
     """Train the missing ``runs`` on ``scheduler``; one line per finished run through ``out``.
 
@@ -240,10 +243,10 @@ def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads
 
     t0 = time.perf_counter()
     outcome: dict[Run, Any] = {}
-    params = {study: study_params(S, values, study) for study in {r.study for r in runs}}
+    params = {study: study_params(values, study) for study in {r.study for r in runs}}
     todo = []
     for run in runs:
-        if run_finished_on_disk(S, params[run.study], run):
+        if run_finished_on_disk(params[run.study], run):
             outcome[run] = "done"
         else:
             todo.append(run)
@@ -254,7 +257,7 @@ def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads
         # the data sets once, here: the tasks then read the caches instead of building them side by side
         for study, protocol in sorted({(r.study, r.protocol) for r in todo}):
             for split in ("train", "val"):
-                S.study_data(params[study], study, split, None, protocol)
+                runs_of.study_data(params[study], study, split, None, protocol)
         conn = _Connection(scheduler, threads, len(todo))
         try:
             from distributed import as_completed
@@ -266,8 +269,8 @@ def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads
                 + (f", dashboard {dashboard}" if dashboard else ""))
             root = str(results_root())
             token = uuid.uuid4().hex[:8]
-            futures = {client.submit(train_run, S.train_models, S.TRAINING_NOTEBOOK[run.study], values, run,
-                                     threads, root, key=f"{run.key}-{token}", pure=False, retries=0): run
+            futures = {client.submit(train_run, runs_of.train_models, runs_of.TRAINING_NOTEBOOK[run.study], values,
+                                     run, threads, root, key=f"{run.key}-{token}", pure=False, retries=0): run
                        for run in todo}
             for i, future in enumerate(as_completed(futures), 1):
                 run = futures[future]
@@ -286,11 +289,11 @@ def run_grid(S, values: dict[str, Any], runs: list[Run], scheduler: str, threads
     if write_curves:
         for study, protocol in sorted({(r.study, r.protocol) for r in runs}):
             if not any(r.study == study and r.protocol == protocol for r in failed):
-                S.train_models(params[study], study, progress=False, protocol=protocol)  # cache hits
+                runs_of.train_models(params[study], study, progress=False, protocol=protocol)  # cache hits
     return outcome
 
 
-def pretrain(S, profile: str, overrides: dict[str, Any] | None, only: list[str] | None, scheduler: str,
+def pretrain(profile: str, overrides: dict[str, Any] | None, only: list[str] | None, scheduler: str,
              threads: int | None = None, out: Callable[[str], None] = print) -> int:
     """What ``python -m drfkit reproduce --jobs N`` does before the notebooks: every missing run of
     the training notebooks it will execute (all, or those in ``only``) on ``scheduler``. The
@@ -301,29 +304,29 @@ def pretrain(S, profile: str, overrides: dict[str, Any] | None, only: list[str] 
     for name in NOTEBOOKS:  # every notebook's parameters before an hour of training, as the pipeline does
         if not only or name in only:
             notebook_params(name, values)
-    studies = [s for s, nb in S.TRAINING_NOTEBOOK.items() if not only or nb in only]
+    studies = [s for s, nb in runs_of.TRAINING_NOTEBOOK.items() if not only or nb in only]
     if not studies:
         return 0
-    runs = grid_runs(S, values, studies)
-    threads = threads or study_params(S, values, studies[0]).threads or 1
+    runs = grid_runs(values, studies)
+    threads = threads or study_params(values, studies[0]).threads or 1
     parse_scheduler(scheduler, threads)
-    outcome = run_grid(S, values, runs, scheduler, threads, out=out)
+    outcome = run_grid(values, runs, scheduler, threads, out=out)
     return 1 if any(isinstance(v, BaseException) for v in outcome.values()) else 0
 
 
-def main_grid(S, args) -> int:
+def main_grid(args) -> int:
     """``python -m drfkit train ... --scheduler ...``: the parsed arguments of ``drfkit.book.train_runs.main``."""
     from drfkit.study.params import load_profile, parse_overrides
 
     try:
         values = load_profile(args.profile) | parse_overrides(args.set)
-        runs = grid_runs(S, values, args.study, args.models or None, args.seeds or None, args.protocol)
-        threads = args.threads or study_params(S, values, runs[0].study if runs else "pendulum").threads or 1
+        runs = grid_runs(values, args.study, args.models or None, args.seeds or None, args.protocol)
+        threads = args.threads or study_params(values, runs[0].study if runs else "pendulum").threads or 1
         parse_scheduler(args.scheduler, threads)
     except ParameterError as exc:
         print(f"parameter error: {exc}", file=sys.stderr)
         return 2
-    outcome = run_grid(S, values, runs, args.scheduler, threads, out=lambda line: print(line, flush=True),
+    outcome = run_grid(values, runs, args.scheduler, threads, out=lambda line: print(line, flush=True),
                        write_curves=not args.models and not args.seeds)
     failed = [r for r, v in outcome.items() if isinstance(v, BaseException)]
     for run in failed:

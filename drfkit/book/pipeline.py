@@ -296,10 +296,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         overrides = parse_overrides(args.set)
         if args.jobs > 1 or args.scheduler:
-            from drfkit.study import studies
             from drfkit.book.grid import pretrain
 
-            if pretrain(studies, args.profile, overrides, args.only, args.scheduler or f"local:{args.jobs}",
+            if pretrain(args.profile, overrides, args.only, args.scheduler or f"local:{args.jobs}",
                         out=lambda line: print(line, flush=True)) != 0:
                 print("FAILED: training grid (the runs above); no notebook was run. Rerun the same command "
                       "to train what is missing", file=sys.stderr)

@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
                              "an address connects to a running Dask scheduler")
     args = parser.parse_args(argv)
     if args.scheduler:
-        return main_grid(studies, args)
+        return main_grid(args)
     if not args.study or len(args.study) != 1:
         parser.error("--study takes exactly one study without --scheduler")
     args.study, args.protocol = args.study[0], args.protocol or "paper"

@@ -81,6 +81,11 @@ from drfkit.util.io import atomic_write_bytes
 
 
 # --------------------------------------------------------------------------- records
+def noise_dir_name(noise: Noise) -> str:
+    """Folder name of one noise level's PifPaf predictions: 'p0.025' for salt-and-pepper 0.025."""
+    return f"p{check_noise(noise, 'salt_and_pepper', 'noise_dir_name').level:g}"
+
+
 def load_nuscenes_records(
     root: str | os.PathLike,
     predictions_dir: str | os.PathLike,

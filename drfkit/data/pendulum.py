@@ -146,6 +146,13 @@ def redraw_noise(arrays: dict[str, np.ndarray], noise: Noise, seed: int,
     return out
 
 
+def fresh_noise_seed(data_seed: int, epoch: int) -> int:
+    """The seed of epoch ``epoch``'s fresh training noise (``redraw_noise``) on the training split made
+    from ``data_seed``: data_seed x 1000 + epoch, from these two alone, so that a resumed run draws
+    what an uninterrupted one drew."""
+    return int(data_seed) * 1000 + int(epoch)
+
+
 def load_pendulum(
     cache_dir: str | os.PathLike,
     split: str,

@@ -24,11 +24,10 @@ import math
 
 import torch
 
+from drfkit.methods.run_config import OBJECTIVES  # named once, with TrainConfig
 from drfkit.models.sequence import check_loss_args, fill_padding, frame_mask, masked_mean
 
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-
-OBJECTIVES = ("model", "nll", "beta_nll", "mse")
 
 
 def _per_value_nll(mean, sigma, targets):

@@ -103,6 +103,18 @@ PROTOCOLS: dict[str, dict[str, str]] = {
 }
 
 
+# The pedestrian study's protocols: what each adds to the DRF family's schedule (the profile's
+# ``ped_epochs``, ``ped_lr``, ``ped_batch_size``). ``book`` takes the objective and schedule of the recipe
+# that fits the mean (beta-NLL, cosine decay, the checkpoint selected on the validation MAE); the
+# pendulum's frame-level parts of it (fresh pixel noise, 25-frame windows) have no counterpart in
+# 10-frame keypoint sequences. Monoloco keeps its published loss and schedule under every protocol, so
+# its runs are shared.
+PEDESTRIAN_PROTOCOLS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "book": {k: FIT_THE_MEAN[k] for k in ("objective", "beta", "lr_schedule", "select_on")},
+}
+
+
 # The noise-regime map (``drfkit.study.regime``): the book's protocol of each model kind, trained at
 # other max noise levels than the paper's 0.5. ``regime_variant`` names them.
 REGIME_BASES = dict(PROTOCOLS["book"])

@@ -28,7 +28,9 @@ from typing import Any, Callable
 import torch
 
 from drfkit.util.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
+from drfkit.data.sequence_data import SequenceData
 from drfkit.methods.objectives import batch_loss, make_optimiser, random_windows
+from drfkit.methods.run_config import TrainConfig, fingerprint, naming_fields
 
 CHECKPOINT_FORMAT = 1
 
@@ -44,116 +46,6 @@ class ResumeMismatchError(RuntimeError):
 # A second process on a finished checkpoint waits this long for the lock (a cache hit holds it for
 # milliseconds); a run that is training holds it for hours, so waiting longer would only hide that.
 LOCK_WAIT_S = 10.0
-
-
-@dataclass
-class SequenceData:
-    """A data set of sequences, as tensors.
-
-    inputs:  (N, T, ...) uint8 images (N, T, 24, 24) or float keypoints (N, T, 17, 3)
-    targets: (N, T, out) float32
-    mask:    (N, T) bool, True on real frames (False on padding); None = all real
-    """
-
-    inputs: torch.Tensor
-    targets: torch.Tensor
-    mask: torch.Tensor | None = None
-
-    def __post_init__(self) -> None:
-        self.inputs = torch.as_tensor(self.inputs)
-        self.targets = torch.as_tensor(self.targets, dtype=torch.float32)
-        if self.targets.ndim == 2:
-            self.targets = self.targets.unsqueeze(-1)
-        if self.mask is not None:
-            self.mask = torch.as_tensor(self.mask, dtype=torch.bool)
-        n, t = self.targets.shape[:2]
-        if len(self) == 0:
-            raise ValueError("empty data set: no sequences to train or evaluate on")
-        if self.inputs.shape[:2] != (n, t):
-            raise ValueError(f"inputs {tuple(self.inputs.shape)} and targets {tuple(self.targets.shape)} "
-                             "disagree on (N, T)")
-        if self.mask is not None and self.mask.shape != (n, t):
-            raise ValueError(f"mask {tuple(self.mask.shape)} must be (N, T) = {(n, t)}")
-        if self.inputs.is_floating_point() and not torch.isfinite(self.inputs).all():
-            raise ValueError("inputs contain NaN or inf; zero missing keypoints with confidence 0 instead")
-        if not torch.isfinite(self.targets).all():
-            raise ValueError("targets contain NaN or inf")
-
-    def __len__(self) -> int:
-        return self.targets.shape[0]
-
-    def frames(self) -> "SequenceData":
-        """Every real frame as its own length-1 sequence (for single-frame models)."""
-        keep = self.mask.reshape(-1) if self.mask is not None else slice(None)
-        flat = lambda x: x.reshape(-1, 1, *x.shape[2:])[keep]  # noqa: E731
-        return SequenceData(flat(self.inputs), flat(self.targets), None)
-
-    def batch(self, idx: torch.Tensor, device: torch.device):
-        mask = None if self.mask is None else self.mask[idx].to(device)
-        return self.inputs[idx].to(device), self.targets[idx].to(device), mask
-
-
-@dataclass
-class TrainConfig:
-    epochs: int
-    lr: float
-    batch_size: int
-    seed: int
-    grad_clip: float | None = 10.0  # max gradient norm; None = no clipping (Monoloco as published)
-    lr_step: int | None = None  # StepLR step (epochs); None = constant lr
-    lr_gamma: float = 1.0
-    framewise: bool = False  # train on single frames (Monoloco)
-    patience: int = 0  # stop after this many epochs without a better validation loss; 0 = never
-    select_on: str = "loss"  # the epoch kept as -best.pt: lowest validation loss, or "l1" of the mean
-    objective: str = "model"  # drfkit.methods.objectives: model (the model's own loss), nll, beta_nll, mse
-    beta: float = 1.0  # of beta_nll: 0 = the NLL, 1 = the mean fitted like MSE
-    mse_warmup: int = 0  # epochs of MSE on the mean before the objective (a staged fit)
-    lr_schedule: str = "step"  # step (StepLR by lr_step / lr_gamma; constant without lr_step) or cosine (to 0 at epochs)
-    weight_decay: float = 0.0  # decoupled (AdamW) when > 0
-    window: int | None = None  # train on one random window of this many frames per sequence and epoch
-    prior_weight: float = 0.0  # weight of the loss on a filter's one-step prior (drfkit.methods.objectives.batch_loss)
-
-    def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size"):
-            if not isinstance(getattr(self, name), int) or getattr(self, name) < 1:
-                raise ValueError(f"TrainConfig.{name} must be an integer >= 1, got {getattr(self, name)!r}")
-        if not isinstance(self.patience, int) or isinstance(self.patience, bool) or self.patience < 0:
-            raise ValueError(f"TrainConfig.patience must be an integer >= 0 (0 = no early stop), got {self.patience!r}")
-        if not (0 < self.lr < 1):
-            raise ValueError(f"TrainConfig.lr must be in (0, 1), got {self.lr!r}")
-        if self.select_on not in SELECTION_METRICS:
-            raise ValueError(f"TrainConfig.select_on must be one of {SELECTION_METRICS}, got {self.select_on!r}")
-        if self.grad_clip is not None and not self.grad_clip > 0:
-            raise ValueError(f"TrainConfig.grad_clip must be > 0 or None (no clipping), got {self.grad_clip!r}")
-        from drfkit.methods.objectives import OBJECTIVES
-
-        if self.objective not in OBJECTIVES:
-            raise ValueError(f"TrainConfig.objective must be one of {OBJECTIVES}, got {self.objective!r}")
-        if not 0.0 <= float(self.beta) <= 1.0:
-            raise ValueError(f"TrainConfig.beta must lie in [0, 1] (0 = NLL, 1 = mean fitted like MSE), got {self.beta!r}")
-        if not isinstance(self.mse_warmup, int) or isinstance(self.mse_warmup, bool) or self.mse_warmup < 0:
-            raise ValueError(f"TrainConfig.mse_warmup must be an integer >= 0 (epochs), got {self.mse_warmup!r}")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"TrainConfig.lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
-        if not self.weight_decay >= 0:
-            raise ValueError(f"TrainConfig.weight_decay must be >= 0, got {self.weight_decay!r}")
-        if self.window is not None and (isinstance(self.window, bool) or not isinstance(self.window, int)
-                                        or self.window < 2):
-            raise ValueError(f"TrainConfig.window must be None (whole sequences) or an integer >= 2, got {self.window!r}")
-        if not (isinstance(self.prior_weight, (int, float)) and self.prior_weight >= 0):
-            raise ValueError(f"TrainConfig.prior_weight must be a number >= 0 (0 = no prior loss), got {self.prior_weight!r}")
-
-
-SELECTION_METRICS = ("loss", "l1")
-LR_SCHEDULES = ("step", "cosine")
-# Fields added after checkpoints were committed: at these values they stay out of names and
-# fingerprints, so every run made before them keeps its files (and resumes).
-LATER_FIELDS = {"select_on": "loss", "objective": "model", "beta": 1.0, "mse_warmup": 0, "lr_schedule": "step",
-                "weight_decay": 0.0, "window": None, "prior_weight": 0.0}
-
-
-def _train_fields(cfg: "TrainConfig") -> dict[str, Any]:
-    return {k: v for k, v in vars(cfg).items() if not (k in LATER_FIELDS and v == LATER_FIELDS[k])}
 
 
 @dataclass
@@ -214,25 +106,6 @@ def _batch_mean(model, data: SequenceData, batch_size: int, device: torch.device
         total += part
         weight += w
     return total / max(weight, 1)
-
-
-# When to stop, not what an epoch computes: epoch e is the same whatever these say, so they
-# are left out of the fingerprint (and a finished or early-stopped run can be extended).
-STOPPING_FIELDS = ("epochs", "patience")
-
-
-def fingerprint(config: dict[str, Any], train_cfg: TrainConfig, data_key: str) -> str:
-    """What a resume must agree on: everything but ``STOPPING_FIELDS`` (a cosine schedule's
-    ``epochs`` stays: it sets every epoch's learning rate)."""
-    keep = ("epochs",) if train_cfg.lr_schedule == "cosine" else ()
-    train = {k: v for k, v in _train_fields(train_cfg).items() if k not in STOPPING_FIELDS or k in keep}
-    return param_hash({"model": config, "train": train, "data": data_key})
-
-
-def naming_fields(train_cfg: TrainConfig) -> dict[str, Any]:
-    """The training fields that name a run's checkpoint files: all but ``patience``, which
-    only decides when the run stops (``epochs`` stays, as in names made before patience)."""
-    return {k: v for k, v in _train_fields(train_cfg).items() if k != "patience"}
 
 
 def patience_exhausted(epoch: int, best_epoch: int, patience: int) -> bool:

@@ -19,6 +19,11 @@ switching on all seven. The "head" is the whole network and ``features`` only ce
 keypoints. BatchNorm always uses its running statistics while sampling, as Monoloco does at
 test time. The S passes run either folded into one batch after one run of the input layer
 ('batched') or one after another ('sequential', as published; kept for the timing study).
+
+``inputs='detected'`` is a diagnostic, not Monoloco: the same network fed what the DRF family's
+encoder reads (``drfkit.models.parts.keypoint_features``: the detected keypoints centred on their
+own box, missed ones 0, that centre and the 17 confidences -> 53 numbers), so that a gap between
+Monoloco and the per-frame no_dynamics can be told apart: its inputs, or its network and loss.
 """
 from __future__ import annotations
 
@@ -27,8 +32,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from drfkit.models.parts import (N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples,
-                                 keypoint_box_centre)
+from drfkit.models.parts import (KEYPOINT_FEATURES, N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples,
+                                 keypoint_box_centre, keypoint_features)
 from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding, frame_mask,
                                     masked_mean)
 
@@ -36,6 +41,8 @@ from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding
 # sigma > 0 and the loss can invert sigma back to s. Real depths are metres away.
 MU_FLOOR = 1e-3
 MC_MODES = ("batched", "sequential")
+# what the network reads: the published 34 centred keypoints, or the DRF family's 53 numbers (a diagnostic)
+INPUTS = {"published": 2 * N_KEYPOINTS, "detected": KEYPOINT_FEATURES}
 _LOG_SQRT2 = 0.5 * math.log(2.0)
 
 
@@ -59,18 +66,23 @@ class Monoloco(SequenceModel):
     per_frame = True
 
     def __init__(self, input_kind: str = "keypoints", out_dim: int = 1, hidden: int = 256,
-                 n_blocks: int = 3, dropout_p: float = 0.2, mc_mode: str = "batched"):
+                 n_blocks: int = 3, dropout_p: float = 0.2, mc_mode: str = "batched", inputs: str = "published"):
         if input_kind != "keypoints" or out_dim != 1:
             raise ValueError(f"Monoloco takes input_kind='keypoints' and out_dim=1, "
                              f"got {input_kind!r} and {out_dim!r}")
         if mc_mode not in MC_MODES:
             raise ValueError(f"mc_mode must be one of {MC_MODES}, got {mc_mode!r}")
+        if inputs not in INPUTS:
+            raise ValueError(f"inputs must be one of {sorted(INPUTS)}, got {inputs!r}")
         check_dropout_p(dropout_p)
+        # the published inputs stay out of the config, so the names of runs made before the option hold
+        extra = {"inputs": inputs} if inputs != "published" else {}
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, hidden=hidden,
-                              n_blocks=n_blocks, dropout_p=dropout_p, mc_mode=mc_mode))
+                              n_blocks=n_blocks, dropout_p=dropout_p, mc_mode=mc_mode, **extra))
         self.dropout_p = float(dropout_p)
         self.mc_mode = mc_mode
-        self.input_layer = nn.Linear(2 * N_KEYPOINTS, hidden)
+        self.inputs = inputs
+        self.input_layer = nn.Linear(INPUTS[inputs], hidden)
         self.input_norm = nn.BatchNorm1d(hidden)
         # block i has layers 2i and 2i + 1; the skip adds the block's input to its output
         self.layers = nn.ModuleList(nn.Linear(hidden, hidden) for _ in range(2 * n_blocks))
@@ -82,6 +94,9 @@ class Monoloco(SequenceModel):
         return self.dropout_p
 
     def features(self, inputs, return_gains=False):
+        if self.inputs == "detected":
+            check_keypoints(inputs)
+            return keypoint_features(inputs.to(self.input_layer.weight.dtype)), None
         return centre_keypoints(inputs), None
 
     def _layer(self, x, linear, norm, p, dropout_on, bn_batch_stats):
@@ -117,10 +132,10 @@ class Monoloco(SequenceModel):
         return mu.unsqueeze(-1), sigma.unsqueeze(-1)
 
     def head(self, h, n_samples=0, dropout_p=None):
-        """h (B, T, 34) -> mean, sigma (B, T, 1), or (S, B, T, 1) for n_samples = S > 0."""
+        """h (B, T, 34) (53 with inputs='detected') -> mean, sigma (B, T, 1), or (S, B, T, 1) for n_samples = S > 0."""
         check_n_samples(n_samples)
-        if h.ndim != 3 or h.shape[-1] != 2 * N_KEYPOINTS:
-            raise ValueError(f"Monoloco.head expects centred keypoints (B, T, 34), got {tuple(h.shape)}")
+        if h.ndim != 3 or h.shape[-1] != INPUTS[self.inputs]:
+            raise ValueError(f"Monoloco.head expects its features (B, T, {INPUTS[self.inputs]}), got {tuple(h.shape)}")
         p = self.dropout_p if dropout_p is None else check_dropout_p(dropout_p)
         b, t, _ = h.shape
         x = h.reshape(b * t, -1)

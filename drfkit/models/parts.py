@@ -105,17 +105,26 @@ class KeypointEncoder(nn.Module):
     def __init__(self, feature_dim: int = 64, hidden: int = 128):
         super().__init__()
         self.net = nn.Sequential(
-            nn.Linear(N_KEYPOINTS * 3 + 2, hidden), nn.ReLU(),
+            nn.Linear(KEYPOINT_FEATURES, hidden), nn.ReLU(),
             nn.Linear(hidden, feature_dim), nn.ReLU(),
         )
         self.out_dim = feature_dim
 
     def forward(self, keypoints: torch.Tensor) -> torch.Tensor:
-        check_keypoints(keypoints)
-        keypoints = keypoints.to(self.net[0].weight.dtype)
-        centre, centred = keypoint_box_centre(keypoints)  # (B, T, 1, 2), (B, T, 17, 2)
-        x = torch.cat([centred.flatten(-2), centre.flatten(-2), keypoints[..., 2]], dim=-1)
-        return self.net(x)
+        check_keypoints(keypoints)  # before the cast: integer keypoints are an error, not a conversion
+        return self.net(keypoint_features(keypoints.to(self.net[0].weight.dtype)))
+
+
+KEYPOINT_FEATURES = N_KEYPOINTS * 3 + 2  # 34 centred (x, y) + the box centre + 17 confidences
+
+
+def keypoint_features(keypoints: torch.Tensor) -> torch.Tensor:
+    """(B, T, 17, 3) -> (B, T, 53): what the DRF family's encoder reads -- the detected keypoints'
+    (x, y) relative to the centre of their box (missed ones 0), that centre, and the 17 confidences.
+    Layout: x0, y0, ..., x16, y16, centre x, centre y, c0, ..., c16."""
+    check_keypoints(keypoints)
+    centre, centred = keypoint_box_centre(keypoints)  # (B, T, 1, 2), (B, T, 17, 2)
+    return torch.cat([centred.flatten(-2), centre.flatten(-2), keypoints[..., 2]], dim=-1)
 
 
 def keypoint_box_centre(keypoints: torch.Tensor, include_missed: bool = False

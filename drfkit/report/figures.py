@@ -8,6 +8,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from drfkit.study.registry import STUDIES
+
 # how the figures and tables name and colour a model (presentation, not the paper's numbers)
 MODEL_LABELS = {"no_dynamics": "No dynamics", "lstm": "LSTM", "monoloco": "Monoloco", "drf": "DRF (ours)",
                 "physics_bound": "true-physics bound"}
@@ -34,10 +36,12 @@ def paper_value(paper: dict, level: float, model: str) -> float:
     return float("nan")
 
 
-# What a figure says about its axes: the noise parameter each study varies and the unit of its
-# targets (the pendulum's (cos θ, sin θ) are dimensionless, the pedestrians' depths in metres).
-NOISE_PARAMETER = {"pendulum": "max noise", "pedestrians": "salt-and-pepper p"}
-TARGET_UNIT = {"pendulum": "(cos θ, sin θ)", "pedestrians": "(m)"}
+# What a figure says about its axes, from each study's registry entry: the noise parameter it varies
+# and the name and unit of its targets (the pendulum's (cos θ, sin θ) are dimensionless, the
+# pedestrians' depths in metres).
+NOISE_PARAMETER = {name: s.noise_name for name, s in STUDIES.items()}
+TARGET_UNIT = {name: s.target_unit for name, s in STUDIES.items()}
+TARGET_NAME = {name: s.target_name for name, s in STUDIES.items()}
 CI_TEXT = "95 % t-interval over seeds"
 
 
@@ -66,7 +70,7 @@ def _noise_name(level_name: str | None, study: str | None) -> str:
 
 def _metric_label(metric: str, study: str | None) -> str:
     unit = TARGET_UNIT.get(study, "")
-    return {"mae": f"{'depth ' if study == 'pedestrians' else ''}MAE {unit}", "mpiw": f"MPIW {unit}",
+    return {"mae": f"{TARGET_NAME.get(study, '')} MAE {unit}", "mpiw": f"MPIW {unit}",
             "crps": f"CRPS {unit}", "picp": "PICP (%)", "nll": "NLL (nats)",
             "cal_error": "calibration error"}.get(metric, metric.upper()).strip()
 

@@ -174,8 +174,8 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
         lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " | "
                      + (evidence_links(cid, prefix) if cid in CLAIM_EVIDENCE else "") + " |")
     if len(protocols) > 1:
-        lines += ["", "— : the claim is judged under the paper's protocol only (the book's protocol changes "
-                      "only the pendulum models)."]
+        lines += ["", "— : the claim is not judged under that protocol (its study's models were not trained "
+                      "under it in this profile)."]
     return lines
 
 

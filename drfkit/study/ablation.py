@@ -26,8 +26,8 @@ import pandas as pd
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, load_pendulum, redraw_noise, with_blackout,
-                                  with_random_blackouts)
+from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, fresh_noise_seed, load_pendulum, redraw_noise,
+                                  with_blackout, with_random_blackouts)
 from drfkit.methods.diagnostics import blackout_summary, diagnose
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, TRAINING_BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
 from drfkit.util.io import atomic_write_json, param_hash
@@ -85,14 +85,10 @@ def train_variant(name: str, seed: int, budget_name: str = "small", out: str | P
     fresh = None
     if spec["train"].get("fresh_noise"):
         def fresh(epoch: int) -> SequenceData:  # the same clean frames, new noise (and blackouts) per epoch
-            return _as_data(redraw_noise(clean_train, noise, FRESH_NOISE_SEED + epoch, spec["blackouts"]))
+            return _as_data(redraw_noise(clean_train, noise, fresh_noise_seed(DATA_SEED, epoch), spec["blackouts"]))
     res = train_model(config, _as_data(train), _as_data(val), cfg, folder / "models" / f"{name}-seed{seed}-{key}",
                       data_key=key, progress=progress, fresh_train=fresh)
     return res, key
-
-
-# seeds of the per-epoch training noise: epoch e of every fresh-noise run draws FRESH_NOISE_SEED + e
-FRESH_NOISE_SEED = DATA_SEED * 1000
 
 
 def train_config(budget: dict, overrides: dict, seed: int) -> TrainConfig:

@@ -89,14 +89,17 @@ def example_frames(study: str, batch: int, n_frames: int = 1, seed: int = 0,
                    device: str | torch.device = "cpu") -> torch.Tensor:
     """Random inputs of the right kind: keypoints (B, T, 17, 3) float32 (normalised x, y
     of order 1, confidences in (0.1, 1]) or pendulum images (B, T, 24, 24) uint8."""
+    if study not in STUDIES:
+        raise ValueError(f"unknown study {study!r}; expected one of {sorted(STUDIES)}")
     gen = torch.Generator().manual_seed(seed)
-    if study == "pedestrians":
+    input_kind = STUDIES[study][0]
+    if input_kind == "keypoints":
         xy = torch.randn(batch, n_frames, 17, 2, generator=gen)
         conf = 0.1 + 0.9 * torch.rand(batch, n_frames, 17, 1, generator=gen)
         return torch.cat([xy, conf], dim=-1).to(device)
-    if study == "pendulum":
+    if input_kind == "pendulum":
         return torch.randint(0, 256, (batch, n_frames, 24, 24), dtype=torch.uint8, generator=gen).to(device)
-    raise ValueError(f"unknown study {study!r}; expected one of {sorted(STUDIES)}")
+    raise ValueError(f"no example frames for input kind {input_kind!r} (study {study!r})")
 
 
 def make_frame_fn(model, mode: str, frame: torch.Tensor, carry: tuple | None, n_samples: int

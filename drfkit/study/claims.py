@@ -365,6 +365,28 @@ def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = 
             "verdict": verdict}
 
 
+# --------------------------------------------------------- a diagnostic beside C4 (notebook 02)
+# Monoloco fed the DRF family's inputs closes this share of its in-distribution gap to no_dynamics or
+# more: the gap is mostly its published inputs (else mostly its network, loss or schedule). Half,
+# because it splits the gap into the larger and the smaller part.
+INPUTS_SHARE = 0.5
+
+
+def monoloco_inputs_reading(summary: pd.DataFrame, level: float) -> dict[str, Any]:
+    """summary: ``drfkit.study.evaluate.summarise`` by model, noise with rows monoloco,
+    monoloco_detected_inputs and no_dynamics. Returns the share of the gap closed and a sentence."""
+    mae = summary[(summary["noise"] - level).abs() < _EPS].set_index("model")["mae"]
+    mono, fed, nd = (float(mae[m]) for m in ("monoloco", "monoloco_detected_inputs", "no_dynamics"))
+    if mono <= nd:
+        return {"share": float("nan"), "text": f"Monoloco ({mono:.3g} m) is no worse than no_dynamics ({nd:.3g} m) at "
+                                               f"p = {level:g}: there is no handicap to explain."}
+    share = (mono - fed) / (mono - nd)
+    cause = "its published inputs" if share >= INPUTS_SHARE else "its network, loss or schedule, not its inputs"
+    return {"share": share, "text": f"At p = {level:g} Monoloco is at {mono:.3g} m, no_dynamics at {nd:.3g} m; the "
+                                    f"same network fed the DRF family's inputs reaches {fed:.3g} m, closing "
+                                    f"{100 * share:.0f} % of the gap: the gap is mostly {cause}."}
+
+
 # ------------------------------------------------------------------------- F1, F2
 # Not claims the paper states but the premise of its method: a recursive filter inside the network
 # is only "a filter" if its gain follows observation quality, its transition predicts and its state

@@ -25,7 +25,7 @@ from typing import Any, Callable, get_args, get_origin
 import yaml
 
 from drfkit.util.paths import PARAMS_DIR
-from drfkit.methods.protocols import ABLATION_BUDGETS, PROTOCOLS, VARIANTS
+from drfkit.methods.protocols import ABLATION_BUDGETS, PEDESTRIAN_PROTOCOLS, PROTOCOLS, VARIANTS
 from drfkit.study.registry import STUDIES
 
 
@@ -158,6 +158,11 @@ SCHEMA = Section("", {
         "epochs": Spec(int, *_POSITIVE),
         "batch_size": Spec(int, *_POSITIVE),
         "lr": Spec(float, *_RATE),
+        "protocols": Spec(list[str], f"a non-empty subset of {list(PEDESTRIAN_PROTOCOLS)} that holds 'paper', "
+                                     "without repeats",
+                          lambda v: "paper" in v and set(v) <= set(PEDESTRIAN_PROTOCOLS) and len(set(v)) == len(v),
+                          "the training protocols notebook 02 trains and notebooks 03 and 05 judge "
+                          "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)"),
     }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
     "monoloco": Section("monoloco_", {
         "epochs": Spec(int, *_POSITIVE),
@@ -217,7 +222,7 @@ _DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablatio
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",
              "ped_data_seed", "sim_detector"]
-_PED_TRAIN = ["ped_models", "ped_epochs", "ped_batch_size", "ped_lr", "monoloco_epochs",
+_PED_TRAIN = ["ped_models", "ped_epochs", "ped_batch_size", "ped_lr", "ped_protocols", "monoloco_epochs",
               "monoloco_batch_size", "monoloco_lr"]
 _UNC = ["n_samples", "dropout_rates", "interval_level"]
 _TIMING = ["timing_batch_sizes", "timing_threads", "timing_min_run_time"]

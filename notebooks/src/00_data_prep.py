@@ -10,7 +10,7 @@
 # 2. **Pedestrians**: PifPaf keypoints of pedestrians tracked over nuScenes keyframes, with
 #    salt-and-pepper pixel noise (p = 0.01 to train, 0.025 and 0.05 out of distribution).
 #    nuScenes and the PifPaf weights cannot be downloaded here, so by default the book uses a
-#    *simulated* nuScenes-like source in the same record format (`drfkit.data.pedestrians`);
+#    *simulated* nuScenes-like source in the same record format (`drfkit.study.pedestrian_runs`);
 #    set `ped_source = "nuscenes"` with `nuscenes_root` and `pifpaf_predictions` to use real data.
 #
 # Every data set is cached under `results/<profile>/data/` by a hash of the parameters that made it.

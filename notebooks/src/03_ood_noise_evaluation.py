@@ -15,10 +15,10 @@
 # It then redraws each of the paper's result figures from our numbers with the paper's published
 # values beside them, and turns claims C1–C5 into computed verdicts (`drfkit.study.claims`).
 # No threshold or model choice here looks at the test sets: models were selected on validation NLL.
-# The pendulum is evaluated under every training protocol of `pend_protocols` (`drfkit.methods.protocols`:
-# the paper's as written, and the book's, under which the DRF's filter is checked to filter in
-# notebook 01); C1, C2 and C5 get a verdict per protocol. The book's protocol changes the pendulum
-# only, so the pedestrians are one set of models, judged once (protocol `paper`).
+# Each study is evaluated under every training protocol of its profile (`pend_protocols`, `ped_protocols`;
+# `drfkit.methods.protocols`: the paper's as written, and the book's, under which the DRF's filter is
+# checked to filter in notebook 01 and the pedestrians' DRF family is fit with β-NLL); every claim gets a
+# verdict per protocol. Monoloco trains one set of runs under both.
 # `eval_studies` names the studies evaluated (both by default); a study left out — for instance
 # while its paper-scale training is still running — has its claims listed as not evaluated.
 
@@ -160,8 +160,8 @@ for group in groups:
 # Each rule is written in the table next to its verdict (`drfkit.study.claims`); the timing (C6) and
 # gating (C7) rows are added by notebooks 04 and 05. C1 and C2 need the pendulum, C3 and C4 the
 # pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated, over the same
-# PICP–MPIW curves as C2. C1, C2 and C5 are judged once per pendulum protocol (C5 with the one set of
-# pedestrian models in each).
+# PICP–MPIW curves as C2. Every claim is judged once per protocol, on each study's models of that
+# protocol (a study that does not train a protocol is judged in it on its paper-protocol models).
 
 # %%
 ood_ped = [p for p in P.ped_eval_p if p > P.ped_train_p]
@@ -169,8 +169,8 @@ ood_pend = [m for m in P.pend_eval_max_noise if m > P.pend_train_max_noise]
 shifted = {"pendulum": ood_pend, "pedestrians": ood_ped}
 baselines = {"pendulum": [m for m in P.pend_models if m != "drf"], "pedestrians": [m for m in P.ped_models if m != "drf"]}
 written = []
-for protocol in PROTOCOLS["pendulum"] if "pendulum" in P.eval_studies else ["paper"]:
-    judged = [g for g in groups if g[1] == protocol or g[0] != "pendulum"]  # this pendulum protocol + pedestrians
+for protocol in dict.fromkeys(pr for s in P.eval_studies for pr in PROTOCOLS[s]):  # the paper's first
+    judged = [(s, protocol if protocol in PROTOCOLS[s] else "paper") for s in P.eval_studies]
     rows = []
     if ("pendulum", protocol) in judged:
         pend_by_seed = part(evals, ("pendulum", protocol))
@@ -178,9 +178,9 @@ for protocol in PROTOCOLS["pendulum"] if "pendulum" in P.eval_studies else ["pap
         rows += [claims.c1_pendulum_mae_ordering(at_paper_noise[("pendulum", protocol)], P.pend_eval_max_noise,
                                                  by_seed=pend_by_seed),
                  claims.c2_pendulum_picp_mpiw(curve_summary[("pendulum", protocol)], P.pend_eval_max_noise)]
-    if protocol == "paper" and ("pedestrians", "paper") in judged:
-        rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", "paper")), ood_ped),
-                 claims.c4_in_distribution_parity(at_paper_noise[("pedestrians", "paper")], P.ped_train_p)]
+    if ("pedestrians", protocol) in judged:
+        rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", protocol)), ood_ped),
+                 claims.c4_in_distribution_parity(at_paper_noise[("pedestrians", protocol)], P.ped_train_p)]
     shift = pd.concat([curve_summary[g].assign(study=g[0]) for g in judged])  # PICP–MPIW curves, every rate
     rows.append(claims.c5_intervals_under_shift(shift, [(s, lv) for s, _ in judged for lv in shifted[s]], baselines))
     table = claims.upsert(P.profile, rows, protocol=protocol)

@@ -30,10 +30,9 @@
 # only); *always* (MC dropout on every frame); *Kalman gain* (MC dropout on the frames whose score
 # exceeds the threshold, one deterministic pass on the others); *random* (as many frames as the
 # Kalman-gain gate selects on this test set, drawn uniformly, seeded: equal compute).
-# Only the DRF has a filter, hence gains: the table covers the DRF models of every seed, and on the
-# pendulum of every training protocol in `pend_protocols` (`drfkit.methods.protocols`; notebook 01 checks
-# that the book protocol's gain follows frame quality, which is what the gate reads). The book's
-# protocol changes the pendulum only: the pedestrians are one set of models (protocol `paper`).
+# Only the DRF has a filter, hence gains: the table covers the DRF models of every seed, of every
+# training protocol of each study (`pend_protocols`, `ped_protocols`; `drfkit.methods.protocols`; notebook
+# 01 checks that the pendulum book protocol's gain follows frame quality, which is what the gate reads).
 #
 # **Gated inference is real.** The features (encoder and filter) run once; the head runs with
 # `n_samples` dropout samples on the gathered selected frames and once on the rest; results are
@@ -202,7 +201,7 @@ plt.show()
 # over seeds. C7a (pendulum): PICP within 1.5 points of always-dropout, at most 0.75× its time, and
 # above random gating. C7b (pedestrians): Kalman-gain and random gating about equal, as the paper
 # found. A gate that selects under 10 % or over 90 % of the frames is not informative. `time_ms` is
-# the whole inference per frame. C7a per pendulum protocol.
+# the whole inference per frame. C7a and C7b per protocol.
 
 # %%
 # NBVAL_IGNORE_OUTPUT

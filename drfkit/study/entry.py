@@ -1,0 +1,89 @@
+"""``Study``: one registry entry, everything the book knows about a study in one place.
+
+A study is what the models are trained and judged on: its input kind and output size, the models it
+can train, the kind of its noise (``drfkit.data.noise.Noise``), the profile keys that hold its models
+and noise levels, and the callables that make its runs -- its data, what names that data in
+checkpoint hashes, each model's options and schedule under a training protocol, and the fresh
+training data of a protocol that redraws it every epoch. The profile ``P`` is read here and in the
+callables only; what they return (``SequenceData``, a ``TrainConfig``, a dict of model options) is
+what the methods below take.
+
+This module imports only ``drfkit.data.noise``: each study's module (``drfkit.study.pendulum_runs``,
+``drfkit.study.pedestrian_runs``) builds its entry, ``drfkit.study.registry`` lists them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from drfkit.data.noise import Noise, check_noise
+
+
+def no_fresh_training(P, protocol: str) -> None:
+    """The default ``Study.fresh_training``: the training split is drawn once."""
+    return None
+
+
+@dataclass(frozen=True)
+class Study:
+    name: str
+    input_kind: str                # the models' input: 'pendulum' images or 'keypoints'
+    out_dim: int                   # outputs per frame
+    kinds: tuple[str, ...]         # every model kind the study can train (a profile picks a subset)
+    models_key: str                # profile key: the models a profile trains
+    train_level_key: str           # profile key: the training noise
+    eval_levels_key: str           # profile key: the test noise levels of the paper's tables
+    sweep_key: str                 # profile key: the noise sweep of notebook 03
+    training_notebook: str         # the notebook that trains the study's models
+    noise_kind: str                # drfkit.data.noise.NOISE_KINDS: what the study's noise levels mean
+    protocols_key: str             # profile key: the training protocols (a list that holds 'paper')
+    all_protocols: tuple[str, ...]  # every protocol the study knows (a profile picks a subset)
+    # (P, split, noise: Noise | level | None, protocol) -> SequenceData
+    data: Callable[..., Any]
+    # (P, protocol) -> the dict that names the training and validation data in checkpoint hashes
+    data_key: Callable[[Any, str], dict[str, Any]]
+    # (P, kind, protocol) -> the options of ``drfkit.models.default_config`` for ``kind``
+    model_options: Callable[[Any, str, str], dict[str, Any]]
+    # (P, kind, seed, protocol) -> drfkit.methods.run_config.TrainConfig
+    train_config: Callable[[Any, str, int, str], Any]
+    # (P, protocol) -> None, or fresh(epoch) -> SequenceData: the training split drawn anew every epoch
+    fresh_training: Callable[[Any, str], Any] = no_fresh_training
+    noise_name: str = "noise"      # the noise parameter's name on axes ("p" alone reads as a dropout rate)
+    target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
+    target_unit: str = ""          # its unit, on axes
+
+    def models(self, P) -> list[str]:
+        return list(getattr(P, self.models_key))
+
+    def train_level(self, P) -> float:
+        return float(getattr(P, self.train_level_key))
+
+    def noise(self, level: "float | Noise | None", P=None) -> Noise:
+        """The study's ``Noise`` at ``level`` (None: the profile's training level; a ``Noise`` must be
+        of the study's kind)."""
+        if level is None:
+            if P is None:
+                raise ValueError(f"{self.name}: no noise level given and no profile to take the training level from")
+            level = self.train_level(P)
+        if isinstance(level, Noise):
+            return check_noise(level, self.noise_kind, f"the {self.name} study")
+        return Noise(self.noise_kind, level)
+
+    def eval_levels(self, P) -> list[float]:
+        return [float(v) for v in getattr(P, self.eval_levels_key)]
+
+    def sweep_levels(self, P) -> list[float]:
+        return [float(v) for v in getattr(P, self.sweep_key)]
+
+    def protocols(self, P) -> list[str]:
+        return list(getattr(P, self.protocols_key))
+
+    def check_protocol(self, protocol: str) -> str:
+        """``protocol`` if the study knows it, else a ValueError naming the ones it does."""
+        if protocol not in self.all_protocols:
+            raise ValueError(f"the {self.name} study has no training protocol {protocol!r}; "
+                             f"it has {list(self.all_protocols)}")
+        return protocol
+
+
+__all__ = ["Study", "no_fresh_training"]

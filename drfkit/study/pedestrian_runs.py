@@ -1,0 +1,190 @@
+"""The pedestrian study's runs: per-detection records (simulated, or nuScenes + PifPaf) cut into
+sequences, what names them, and each model's options and schedule under a training protocol
+(``drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS``). ``PEDESTRIANS`` is its registry entry.
+
+Why a simulation: the paper uses nuScenes images and PifPaf keypoints, which need a licence-gated
+download and a GPU keypoint detector. The simulation keeps what matters for the study -- tracks of
+walking people seen at 2 Hz by a moving front camera, keypoints whose quality drops with
+salt-and-pepper noise and with distance -- and produces records in the same format as the real
+loader (``drfkit.data.nuscenes``), so everything downstream runs on either. The source is one
+parameter (``ped_source``): ``load_pedestrians`` returns the records of ``drfkit.data.records`` from
+the simulation (``drfkit.data.sim_world``, the ground truth, seen by ``drfkit.data.sim_detector``, the
+keypoint detector standing in for PifPaf; ``drfkit.data.drawing`` draws its frames) or from the real
+nuScenes + PifPaf reader.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from drfkit.data import nuscenes
+from drfkit.data.noise import Noise, check_noise
+from drfkit.data.records import check_records
+from drfkit.data.records import make_sequences, split_by_scene
+from drfkit.data.sequence_data import SequenceData
+from drfkit.data.sim_detector import DetectorConfig, simulate_records
+from drfkit.data.sim_world import simulate_truth
+from drfkit.methods.protocols import PEDESTRIAN_PROTOCOLS
+from drfkit.methods.run_config import TrainConfig
+from drfkit.study.entry import Study
+from drfkit.util.io import param_hash
+from drfkit.util.paths import data_dir
+
+# Bump when the simulation or detector changes behaviour, so cached files are rebuilt.
+SIMULATOR_VERSION = 1
+DATA_KEYS = ("ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
+             "ped_frames_per_scene", "ped_train_p", "ped_seq_len", "ped_data_seed", "sim_detector")
+
+
+def load_simulated_pedestrians(
+    cache_dir: str | os.PathLike,
+    noise: Noise,
+    *,
+    n_scenes: int = 165,
+    frames_per_scene: int = 20,
+    seed: int = 0,
+    detector: DetectorConfig | Mapping[str, Any] | None = None,
+    simulation: Mapping[str, Any] | None = None,
+) -> dict[str, np.ndarray]:
+    """Simulated pedestrian records under salt-and-pepper ``noise``:
+    ``simulate_truth(n_scenes, frames_per_scene, seed, **simulation)`` observed by
+    ``simulate_records(truth, noise, seed, detector)``, cached as ``<cache_dir>/pedestrians-sim-<hash>.npz``
+    with every parameter in the hash. The records pass ``check_records``."""
+    from drfkit.util.io import cached_npz
+
+    check_noise(noise, "salt_and_pepper", "the pedestrian data")
+    detector = DetectorConfig.from_dict(detector)
+    simulation = dict(simulation or {})
+    params = {
+        "source": "simulated", "noise": noise.key(), "n_scenes": n_scenes,
+        "frames_per_scene": frames_per_scene, "seed": seed, "detector": detector.to_dict(),
+        "simulation": simulation, "simulator_version": SIMULATOR_VERSION,
+    }
+
+    def build() -> dict[str, np.ndarray]:
+        truth = simulate_truth(n_scenes, frames_per_scene, seed, **simulation)
+        return simulate_records(truth, noise, seed, detector)
+
+    rec = cached_npz(cache_dir, "pedestrians-sim", params, build)
+    check_records(rec)
+    return rec
+
+
+def load_pedestrians(
+    cache_dir: str | os.PathLike,
+    source: str,
+    noise: Noise,
+    *,
+    n_scenes: int = 165,
+    frames_per_scene: int = 20,
+    seed: int = 0,
+    detector: DetectorConfig | Mapping[str, Any] | None = None,
+    nuscenes_root: str | os.PathLike | None = None,
+    predictions_root: str | os.PathLike | None = None,
+    nuscenes_version: str = "v1.0-mini",
+    cameras: tuple[str, ...] | None = None,
+    simulation: Mapping[str, Any] | None = None,
+) -> dict[str, np.ndarray]:
+    """Pedestrian records under salt-and-pepper ``noise`` from either source (``ped_source``).
+
+    source='simulated': ``load_simulated_pedestrians`` (cached under
+    ``cache_dir``). source='nuscenes': ``drfkit.data.nuscenes.load_nuscenes_records`` reading the tables
+    under ``nuscenes_root`` and PifPaf predictions from ``<predictions_root>/p<level>/``
+    (``noise_dir_name``, e.g. ``p0.025``); the simulation arguments are ignored, and nothing is
+    cached (the files on disk are the source of truth). Both return records that pass ``check_records``.
+    """
+    check_noise(noise, "salt_and_pepper", "the pedestrian data")
+    if source == "simulated":
+        return load_simulated_pedestrians(cache_dir, noise, n_scenes=n_scenes, frames_per_scene=frames_per_scene,
+                                          seed=seed, detector=detector, simulation=simulation)
+    if source == "nuscenes":
+        if nuscenes_root is None or predictions_root is None:
+            raise ValueError(
+                "source='nuscenes' needs nuscenes_root (folder holding '<version>/' tables and "
+                "'samples/') and predictions_root (folder with one PifPaf output folder per noise "
+                "level, named like 'p0.025')")
+        return nuscenes.load_nuscenes_records(
+            nuscenes_root, Path(predictions_root) / nuscenes.noise_dir_name(noise), noise,
+            version=nuscenes_version, cameras=tuple(cameras or nuscenes.DEFAULT_CAMERAS))
+    raise ValueError(f"source must be 'simulated' or 'nuscenes', got {source!r}")
+
+
+def pedestrian_records(P, noise: Noise | float | None = None) -> dict[str, Any]:
+    """Per-detection records under ``noise`` (a ``Noise`` or its salt-and-pepper p; default the training
+    noise), all splits."""
+    return load_pedestrians(
+        data_dir(P.profile), P.ped_source, PEDESTRIANS.noise(noise, P), n_scenes=P.ped_n_scenes,
+        frames_per_scene=P.ped_frames_per_scene, seed=P.ped_data_seed,
+        detector=DetectorConfig.from_dict(P.sim_detector),
+        nuscenes_root=P.nuscenes_root or None, predictions_root=P.pifpaf_predictions or None,
+        nuscenes_version=P.nuscenes_version)
+
+
+def pedestrian_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
+    """Sequences of one split (split by scene, the same scenes at every noise level)."""
+    splits = split_by_scene(pedestrian_records(P, noise), seed=P.ped_data_seed)
+    return make_sequences(splits[split], P.ped_seq_len)
+
+
+def pedestrian_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
+    """A split as tensors: every protocol trains on the same sequences."""
+    PEDESTRIANS.check_protocol(protocol)
+    seqs = pedestrian_split(P, split, noise)
+    return SequenceData(torch.from_numpy(seqs["inputs"]), torch.from_numpy(seqs["targets"]),
+                        torch.from_numpy(seqs["mask"]))
+
+
+def pedestrian_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+    PEDESTRIANS.check_protocol(protocol)
+    return {k: getattr(P, k) for k in DATA_KEYS}
+
+
+_TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once
+
+
+def target_statistics(P) -> dict[str, float]:
+    """Mean and standard deviation of the training depths (valid frames), rounded to cm so
+    the configuration (and the checkpoint names hashed from it) is stable."""
+    key = param_hash(pedestrian_data_key(P))
+    if key not in _TARGET_STATISTICS:
+        train = pedestrian_data(P, "train")
+        depths = train.targets[train.mask] if train.mask is not None else train.targets
+        _TARGET_STATISTICS[key] = {"target_offset": round(float(depths.mean()), 2),
+                                   "target_scale": round(float(depths.std()), 2)}
+    return dict(_TARGET_STATISTICS[key])
+
+
+def pedestrian_model_options(P, kind: str, protocol: str = "paper") -> dict[str, Any]:
+    """For the DRF family the decoder works in standardised depth units (``target_statistics`` of the
+    training split, which needs ``P``); Monoloco keeps its published design (metres directly)."""
+    PEDESTRIANS.check_protocol(protocol)
+    return target_statistics(P) if kind != "monoloco" and P is not None else {}
+
+
+def pedestrian_train_config(P, kind: str, seed: int, protocol: str = "paper") -> TrainConfig:
+    """Monoloco: its published schedule under every protocol -- StepLR(20, 0.9), single frames, no
+    gradient clipping, the epoch selected on validation L1 of mu (Bertoni et al. 2019, as in their
+    code). The DRF family: Adam at the profile's lr, epochs and batch (batch and clipping at 10 are
+    ours), with the protocol's recipe (``PEDESTRIAN_PROTOCOLS``)."""
+    PEDESTRIANS.check_protocol(protocol)
+    if kind == "monoloco":
+        return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
+                           seed=seed, lr_step=20, lr_gamma=0.9, framewise=True, grad_clip=None, select_on="l1")
+    return TrainConfig(epochs=P.ped_epochs, lr=P.ped_lr, batch_size=P.ped_batch_size, seed=seed,
+                       **PEDESTRIAN_PROTOCOLS[protocol])
+
+
+PEDESTRIANS = Study(
+    "pedestrians", "keypoints", 1, ("drf", "no_dynamics", "lstm", "monoloco"), models_key="ped_models",
+    train_level_key="ped_train_p", eval_levels_key="ped_eval_p", sweep_key="ped_sweep_p",
+    training_notebook="02_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="ped_protocols",
+    all_protocols=tuple(PEDESTRIAN_PROTOCOLS), data=pedestrian_data, data_key=pedestrian_data_key,
+    model_options=pedestrian_model_options, train_config=pedestrian_train_config,
+    noise_name="salt-and-pepper p", target_name="depth", target_unit="(m)")
+
+__all__ = ["PEDESTRIANS", "SIMULATOR_VERSION", "load_pedestrians", "load_simulated_pedestrians", "pedestrian_data", "pedestrian_data_key", "pedestrian_model_options", "pedestrian_records",
+           "pedestrian_split", "pedestrian_train_config", "target_statistics"]
