@@ -183,3 +183,28 @@ def test_every_registered_study_is_wired_end_to_end():
         assert set(s.kinds) <= set(MODEL_CLASSES), name
         assert studies.TRAINING_NOTEBOOK[name] == s.training_notebook
         assert s.noise_kind in NOISE_KINDS and s.noise(0.1) == Noise(s.noise_kind, 0.1), name
+
+
+def profile_reads(source: str, names: set[str]) -> list[str]:
+    """Every ``P.<name>`` in ``source`` where ``name`` is a profile parameter (``params.SPECS``): how
+    the book reads its profile ``P`` (a covariance called P has ``P.shape``, no profile names)."""
+    return [f"{node.lineno}: P.{node.attr}" for node in ast.walk(ast.parse(source))
+            if isinstance(node, ast.Attribute) and node.attr in names and isinstance(node.value, ast.Name)
+            and node.value.id == "P"]
+
+
+def test_profile_reader_known_answer():
+    source = "def f(P, z, p):\n    return P.pend_lr + z.pend_lr + P.shape[0] + p.n_samples\n"
+    assert profile_reads(source, {"pend_lr", "n_samples"}) == ["2: P.pend_lr"]
+
+
+def test_nothing_below_the_study_layer_reads_the_profile():
+    """Methods, models, data, core and util take explicit arguments: no module there reads a
+    profile parameter off the profile (``P.pend_lr``); the study and book layers are its readers."""
+    from drfkit.study.params import SPECS
+
+    below = [p for p in PACKAGE.rglob("*.py") if layer_of(module_name(p)) in
+             {name for name, rank in LAYERS.items() if rank < LAYERS["study"]}]
+    assert len(below) > 20, "the layers below the study layer were not found"
+    reads = [f"{module_name(p)}:{r}" for p in below for r in profile_reads(p.read_text(encoding="utf-8"), set(SPECS))]
+    assert not reads, "the profile read below the study layer: " + "; ".join(reads)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Mapping
 from typing import Callable
 
 import numpy as np
@@ -47,18 +48,41 @@ from drfkit.methods.timing.clock import _single_calls, _warm_timer, load_average
 
 BASELINE = ("monoloco", "published")  # the denominator of ratio_to_monoloco_published
 
-# study -> (input kind, out_dim, models) from drfkit.study.registry; the pedestrian study, the one the paper
-# times, first, and Monoloco (the baseline of every ratio) first among its models
-STUDIES: dict[str, tuple[str, int, tuple[str, ...]]] = {
-    name: (s.input_kind, s.out_dim, tuple(sorted(s.kinds, key=lambda k: k != BASELINE[0])))
-    for name, s in sorted(REGISTRY.items(), key=lambda item: item[0] != "pedestrians")}
-# model -> the modes it is timed in (see the module docstring)
-MODES: dict[str, tuple[str, ...]] = {
+class _TimedStudies(Mapping):
+    """study -> (input kind, out_dim, models), read from ``drfkit.study.registry`` when asked (a model
+    or study registered later is timed too); the pedestrian study, the one the paper times, first, and
+    Monoloco (the baseline of every ratio) first among its models."""
+
+    def _table(self) -> dict[str, tuple[str, int, tuple[str, ...]]]:
+        return {name: (s.input_kind, s.out_dim, tuple(sorted(s.kinds, key=lambda k: k != BASELINE[0])))
+                for name, s in sorted(REGISTRY.items(), key=lambda item: item[0] != "pedestrians")}
+
+    def __getitem__(self, study: str):
+        return self._table()[study]
+
+    def __iter__(self):
+        return iter(self._table())
+
+    def __len__(self) -> int:
+        return len(REGISTRY)
+
+
+class _Modes(dict):
+    """model -> the modes it is timed in (see the module docstring); a model not listed is timed
+    with and without sampling (``DEFAULT_MODES``)."""
+
+    def __missing__(self, kind: str) -> tuple[str, ...]:
+        return DEFAULT_MODES
+
+
+STUDIES = _TimedStudies()
+DEFAULT_MODES = ("batched", "no_sampling")
+MODES: dict[str, tuple[str, ...]] = _Modes({
     "monoloco": ("published", "batched", "no_sampling"),
     "drf": ("batched", "sequential", "naive", "no_sampling"),
-    "no_dynamics": ("batched", "no_sampling"),
-    "lstm": ("batched", "no_sampling"),
-}
+    "no_dynamics": DEFAULT_MODES,
+    "lstm": DEFAULT_MODES,
+})
 COLUMNS = ["study", "model", "mode", "n_samples", "batch", "threads", "device", "median_ms_per_frame",
            "iqr_ms_per_frame", "median_ms_per_call", "ratio_to_monoloco_published", "ratio_to_no_sampling",
            "load_1min"]
@@ -111,7 +135,7 @@ def make_frame_fn(model, mode: str, frame: torch.Tensor, carry: tuple | None, n_
     """
     from drfkit.methods.uncertainty import summarise_samples
 
-    allowed = MODES.get(model.kind, ())
+    allowed = MODES[model.kind]
     if mode not in allowed:
         raise ValueError(f"mode {mode!r} is not timed for {model.kind}; expected one of {allowed}")
     if mode == "published" and getattr(model, "mc_mode", None) != "sequential":

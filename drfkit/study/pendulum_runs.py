@@ -56,9 +56,15 @@ def pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
     return key | blackouts | frames | fresh
 
 
+def _paper_default(protocol: str, kind: str) -> bool:
+    """A kind that the paper's protocol does not list (a model added to the registry, not to
+    ``drfkit.methods.protocols``) trains there with its defaults; other protocols name every kind."""
+    return protocol == "paper" and protocol in PROTOCOLS and kind not in PROTOCOLS[protocol]
+
+
 def pendulum_model_options(P, kind: str, protocol: str = "paper") -> dict[str, Any]:
     """The options of ``kind``'s variant under ``protocol``."""
-    return dict(protocol_spec(protocol, kind)["model"])
+    return {} if _paper_default(protocol, kind) else dict(protocol_spec(protocol, kind)["model"])
 
 
 def recipe_fields(spec: dict[str, Any]) -> dict[str, Any]:
