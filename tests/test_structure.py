@@ -208,3 +208,14 @@ def test_nothing_below_the_study_layer_reads_the_profile():
     assert len(below) > 20, "the layers below the study layer were not found"
     reads = [f"{module_name(p)}:{r}" for p in below for r in profile_reads(p.read_text(encoding="utf-8"), set(SPECS))]
     assert not reads, "the profile read below the study layer: " + "; ".join(reads)
+
+
+def test_the_registry_says_which_levels_and_models_a_claim_sees():
+    from types import SimpleNamespace
+
+    from drfkit.study.registry import STUDIES
+
+    P = SimpleNamespace(pend_eval_max_noise=[0.5, 0.75], pend_train_max_noise=0.5, pend_models=["drf", "lstm"],
+                        ped_eval_p=[0.01, 0.025, 0.05], ped_train_p=0.01, ped_models=["monoloco", "drf"])
+    assert STUDIES["pendulum"].shifted_levels(P) == [0.75] and STUDIES["pendulum"].baselines(P) == ["lstm"]
+    assert STUDIES["pedestrians"].shifted_levels(P) == [0.025, 0.05] and STUDIES["pedestrians"].baselines(P) == ["monoloco"]

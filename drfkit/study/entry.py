@@ -72,6 +72,15 @@ class Study:
     def eval_levels(self, P) -> list[float]:
         return [float(v) for v in getattr(P, self.eval_levels_key)]
 
+    def shifted_levels(self, P) -> list[float]:
+        """The test levels out of distribution: the paper's levels above the training noise (what C3
+        and C5 judge)."""
+        return [lv for lv in self.eval_levels(P) if lv > self.train_level(P)]
+
+    def baselines(self, P) -> list[str]:
+        """The profile's models the DRF is compared with (every one but the DRF)."""
+        return [kind for kind in self.models(P) if kind != "drf"]
+
     def sweep_levels(self, P) -> list[float]:
         return [float(v) for v in getattr(P, self.sweep_key)]
 

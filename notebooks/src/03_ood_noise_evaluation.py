@@ -164,10 +164,9 @@ for group in groups:
 # protocol (a study that does not train a protocol is judged in it on its paper-protocol models).
 
 # %%
-ood_ped = [p for p in P.ped_eval_p if p > P.ped_train_p]
-ood_pend = [m for m in P.pend_eval_max_noise if m > P.pend_train_max_noise]
-shifted = {"pendulum": ood_pend, "pedestrians": ood_ped}
-baselines = {"pendulum": [m for m in P.pend_models if m != "drf"], "pedestrians": [m for m in P.ped_models if m != "drf"]}
+# which levels and models a claim sees: the registry's answer for each study
+shifted = {s: registry.study(s).shifted_levels(P) for s in P.eval_studies}
+baselines = {s: registry.study(s).baselines(P) for s in P.eval_studies}
 written = []
 for protocol in dict.fromkeys(pr for s in P.eval_studies for pr in PROTOCOLS[s]):  # the paper's first
     judged = [(s, protocol if protocol in PROTOCOLS[s] else "paper") for s in P.eval_studies]
@@ -179,7 +178,7 @@ for protocol in dict.fromkeys(pr for s in P.eval_studies for pr in PROTOCOLS[s])
                                                  by_seed=pend_by_seed),
                  claims.c2_pendulum_picp_mpiw(curve_summary[("pendulum", protocol)], P.pend_eval_max_noise)]
     if ("pedestrians", protocol) in judged:
-        rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", protocol)), ood_ped),
+        rows += [claims.c3_pedestrian_ood_gain(part(evals, ("pedestrians", protocol)), shifted["pedestrians"]),
                  claims.c4_in_distribution_parity(at_paper_noise[("pedestrians", protocol)], P.ped_train_p)]
     shift = pd.concat([curve_summary[g].assign(study=g[0]) for g in judged])  # PICP–MPIW curves, every rate
     rows.append(claims.c5_intervals_under_shift(shift, [(s, lv) for s, _ in judged for lv in shifted[s]], baselines))
