@@ -2,11 +2,12 @@
 and the "line" is its entry in ``MODEL_CLASSES`` and the pendulum study's ``kinds``, both made inside
 the test (monkeypatched, so nothing outlives it). The new kind then goes through what every model
 goes through -- training, evaluation, timing, a claim's verdict -- on tiny data, with no other file
-touched."""
+touched. Likewise a noise kind: its meaning and its corruption of frames, registered in the test."""
 from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
@@ -72,3 +73,39 @@ def test_an_unregistered_kind_is_named_in_the_error(toy_registered, monkeypatch)
     with pytest.raises(ValueError, match="protocol 'book' has no 'toy' model"):
         studies.train_config(toy_registered, "pendulum", "toy", 0, "book")
     assert torch.is_tensor(bench.example_frames("pendulum", 1))
+
+
+def _gaussian_frames(clean, level, factor_rng, pixel_rng):
+    """A toy noise kind: Gaussian pixel noise of standard deviation level x 255 on every frame."""
+    noisy = clean + pixel_rng.normal(0.0, 255.0 * level, size=clean.shape)
+    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8), np.full(clean.shape[:2], level, np.float32)
+
+
+def test_a_noise_kind_registered_in_the_test_makes_its_own_data_and_runs(monkeypatch, tmp_path):
+    """A noise kind is its meaning (``NOISE_KINDS``) and how it corrupts frames (``FRAME_CORRUPTIONS``);
+    a study that names it gets its own frames, caches and checkpoint names, and trains and evaluates."""
+    from drfkit.data import noise as noise_module
+    from drfkit.data import pendulum
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
+    monkeypatch.setitem(noise_module.NOISE_KINDS, "toy_gaussian", "std of Gaussian pixel noise / 255")
+    monkeypatch.setitem(pendulum.FRAME_CORRUPTIONS, "toy_gaussian", _gaussian_frames)
+    entry = dataclasses.replace(registry.STUDIES["pendulum"], name="pendulum_gaussian", noise_kind="toy_gaussian")
+    monkeypatch.setitem(registry.STUDIES, "pendulum_gaussian", entry)
+    values = load_profile("quick") | {
+        "profile": "tiny", "pend_train_sequences": 4, "pend_val_sequences": 2, "pend_test_sequences": 2,
+        "pend_seq_len": 6, "pend_epochs": 1, "pend_batch_size": 2, "seeds": [0], "pend_models": ["no_dynamics"],
+        "pend_protocols": ["paper"]}
+    P = for_notebook("01_pendulum_training", values)
+    gaussian, benchmark = (studies.study_data(P, s, "test", 0.3) for s in ("pendulum_gaussian", "pendulum"))
+    assert not torch.equal(gaussian.inputs, benchmark.inputs) and torch.equal(gaussian.targets, benchmark.targets)
+    frames = pendulum.generate_pendulum(2, 6, noise_module.Noise("toy_gaussian", 0.3), seed=P.pend_data_seed + 2)
+    assert np.array_equal(gaussian.inputs.numpy(), frames["images"])  # the registered corruption made them
+    assert studies.study_data_key(P, "pendulum_gaussian")["noise_kind"] == "toy_gaussian"
+    assert "noise_kind" not in studies.study_data_key(P, "pendulum")  # the benchmark's runs keep their names
+    results = studies.train_models(P, "pendulum_gaussian", progress=False)
+    assert results[("no_dynamics", 0)].best_path.name.startswith("pendulum_gaussian-no_dynamics-seed0-")
+    evals = evaluate_study(P, "pendulum_gaussian", [0.3, 0.6])
+    assert set(evals["noise"]) == {0.3, 0.6} and (evals["mae"] > 0).all()
+    with pytest.raises(ValueError, match="no corruption of pendulum frames for salt_and_pepper"):
+        pendulum.generate_pendulum(2, 6, noise_module.Noise("salt_and_pepper", 0.1), seed=0)

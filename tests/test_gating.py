@@ -174,7 +174,7 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
                         gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95)
     out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
                                     min_run_time=0.001)
-    assert served == [("val", 0.05), ("test", 0.05)]
+    assert [(split, noise.level) for split, noise in served] == [("val", 0.05), ("test", 0.05)]
     assert [kind for kind, _ in recorded] == ["direction", "threshold"]
     for _, args in recorded:
         for a in args:

@@ -198,7 +198,7 @@ def test_max_noise_zero_is_clean():
         (dict(n_sequences=2.0), "n_sequences"),
         (dict(seq_len=0), "seq_len"),
         (dict(noise=0.5), "takes a Noise value"),
-        (dict(noise=Noise("salt_and_pepper", 0.5)), "takes rkn_uniform noise"),
+        (dict(noise=Noise("salt_and_pepper", 0.5)), "no corruption of pendulum frames for salt_and_pepper"),
         (dict(seed=-1), "seed"),
         (dict(seed=1.5), "seed"),
     ],

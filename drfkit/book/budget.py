@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from drfkit.study import studies
+from drfkit.study import registry, studies
 from drfkit.util.io import atomic_write_csv, torch_load_checked
 from drfkit.study.params import Params, load_profile, notebook_params
 from drfkit.util.paths import results_dir
@@ -54,7 +54,7 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
     what ``step_ratio`` would be if both models ran their products at the same rate.
     """
     rows = []
-    for study in ("pendulum", "pedestrians"):
+    for study in registry.STUDIES:  # every registered study, in the registry's order
         train = studies.study_data(P, study, "train")
         configs = {kind: studies.train_config(P, study, kind, P.seeds[0]) for kind in studies.study_models(P, study)}
         groups: dict[tuple[bool, int], list[str]] = {}
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
     args = ap.parse_args(argv)
     values = load_profile(args.profile)
-    keys = set(notebook_params("01_pendulum_training", values)) | set(notebook_params("02_nuscenes_training", values))
+    keys = set().union(*(notebook_params(s.training_notebook, values) for s in registry.STUDIES.values()))
     P = Params(**{k: values[k] for k in keys})
     if args.threads or P.threads:
         torch.set_num_threads(args.threads or P.threads)

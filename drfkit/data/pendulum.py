@@ -46,10 +46,11 @@ from __future__ import annotations
 
 import os
 import re
+from typing import Callable
 
 import numpy as np
 
-from drfkit.data.noise import Noise, blend_uniform_noise, check_noise, rkn_noise_factors
+from drfkit.data.noise import Noise, blend_uniform_noise, rkn_noise_factors
 from drfkit.util.io import cached_npz
 
 # Seed conventions of the book's corrupted pendulum splits (every study draws them the same way).
@@ -81,7 +82,7 @@ _NOISE_CHUNK = 256  # sequences blended at once (bounds the memory of the pixel 
 
 def generate_pendulum(n_sequences: int, seq_len: int, noise: Noise, seed: int) -> dict[str, np.ndarray]:
     """Simulate, render and corrupt ``n_sequences`` pendulum sequences of ``seq_len`` frames at
-    ``noise`` = ``Noise("rkn_uniform", max_noise)``.
+    ``noise`` = ``Noise("rkn_uniform", max_noise)`` (the benchmark's; any kind in ``FRAME_CORRUPTIONS``).
 
     Returns a dict of arrays:
       'images'  uint8 (N, T, 24, 24)  noisy observations
@@ -104,7 +105,7 @@ def generate_pendulum(n_sequences: int, seq_len: int, noise: Noise, seed: int) -
     theta, _ = _simulate(theta0, seq_len, physics_rng)
     clean = render_pendulum(theta)
 
-    images, levels = _corrupt(clean, max_noise, factor_rng, pixel_rng)
+    images, levels = FRAME_CORRUPTIONS[noise.kind](clean, max_noise, factor_rng, pixel_rng)
     targets = np.stack([np.cos(theta), np.sin(theta)], axis=-1).astype(np.float32)
     return {
         "images": images,
@@ -128,6 +129,23 @@ def _corrupt(clean: np.ndarray, max_noise: float, factor_rng, pixel_rng) -> tupl
     return images, levels
 
 
+# noise kind -> how it corrupts a split's clean frames: (clean uint8 (N, T, 24, 24), level, factor_rng,
+# pixel_rng) -> (noisy uint8 (N, T, 24, 24), per-frame noise float32 (N, T)). A new noise kind is its
+# meaning in ``drfkit.data.noise.NOISE_KINDS`` and its corruption here; the generator, the fresh noise of
+# training and the caches (``Noise.key`` names them) follow.
+FRAME_CORRUPTIONS: dict[str, Callable[..., tuple[np.ndarray, np.ndarray]]] = {"rkn_uniform": _corrupt}
+
+
+def check_frame_noise(noise, where: str) -> Noise:
+    """``noise`` if it is a ``Noise`` whose kind can corrupt pendulum frames, else a clear error."""
+    if not isinstance(noise, Noise):
+        raise TypeError(f"{where} takes a Noise value, e.g. Noise('rkn_uniform', 0.5), got {noise!r}")
+    if noise.kind not in FRAME_CORRUPTIONS:
+        raise ValueError(f"{where} has no corruption of pendulum frames for {noise}; kinds with one: "
+                         f"{sorted(FRAME_CORRUPTIONS)} (register yours in drfkit.data.pendulum.FRAME_CORRUPTIONS)")
+    return noise
+
+
 def redraw_noise(arrays: dict[str, np.ndarray], noise: Noise, seed: int,
                  blackouts: dict | None = None) -> dict[str, np.ndarray]:
     """A copy of a ``generate_pendulum`` split with new noise on the same clean frames: a new
@@ -135,10 +153,10 @@ def redraw_noise(arrays: dict[str, np.ndarray], noise: Noise, seed: int,
     ``blackouts`` = {"fraction", "lengths"} is given, new random pure-noise windows
     (``with_random_blackouts``). Deterministic for ``seed``; training draws one per epoch
     (``fresh noise``), so the network never sees the same noisy pixel twice."""
-    max_noise = check_noise(noise, "rkn_uniform", "redraw_noise").level
+    noise = check_frame_noise(noise, "redraw_noise")
     factor_rng, pixel_rng, blackout_seed = np.random.SeedSequence([int(seed), 17]).spawn(3)
-    images, levels = _corrupt(arrays["clean"], max_noise, np.random.default_rng(factor_rng),
-                              np.random.default_rng(pixel_rng))
+    images, levels = FRAME_CORRUPTIONS[noise.kind](arrays["clean"], noise.level, np.random.default_rng(factor_rng),
+                                                   np.random.default_rng(pixel_rng))
     out = dict(arrays) | {"images": images, "noise": levels}
     if blackouts:
         out = with_random_blackouts(out, blackouts["fraction"], tuple(blackouts["lengths"]),
@@ -304,13 +322,13 @@ def _simulate(
 
 
 def _check_generation_args(n_sequences, seq_len, noise, seed) -> float:
-    """The max noise of ``noise`` (an rkn_uniform ``Noise``) once every argument is checked."""
+    """The level of ``noise`` (a ``Noise`` with a ``FRAME_CORRUPTIONS`` entry) once every argument is checked."""
     for name, value in (("n_sequences", n_sequences), ("seq_len", seq_len)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             raise TypeError(f"{name} must be an integer, got {value!r}")
         if value < 1:
             raise ValueError(f"{name} must be >= 1, got {value}")
-    check_noise(noise, "rkn_uniform", "the pendulum generator")
+    check_frame_noise(noise, "the pendulum generator")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
         raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
     if seed < 0:

@@ -19,7 +19,7 @@ from typing import Any, Callable
 from drfkit.data.noise import Noise, check_noise
 
 
-def no_fresh_training(P, protocol: str) -> None:
+def no_fresh_training(P, protocol: str, noise=None) -> None:
     """The default ``Study.fresh_training``: the training split is drawn once."""
     return None
 
@@ -38,16 +38,17 @@ class Study:
     noise_kind: str                # drfkit.data.noise.NOISE_KINDS: what the study's noise levels mean
     protocols_key: str             # profile key: the training protocols (a list that holds 'paper')
     all_protocols: tuple[str, ...]  # every protocol the study knows (a profile picks a subset)
-    # (P, split, noise: Noise | level | None, protocol) -> SequenceData
+    # (P, split, noise: Noise, protocol) -> SequenceData (``drfkit.study.studies.study_data`` makes the Noise)
     data: Callable[..., Any]
-    # (P, protocol) -> the dict that names the training and validation data in checkpoint hashes
-    data_key: Callable[[Any, str], dict[str, Any]]
+    # (P, protocol, noise kind) -> the dict that names the training and validation data in checkpoint hashes
+    data_key: Callable[[Any, str, str], dict[str, Any]]
     # (P, kind, protocol) -> the options of ``drfkit.models.default_config`` for ``kind``
     model_options: Callable[[Any, str, str], dict[str, Any]]
     # (P, kind, seed, protocol) -> drfkit.methods.run_config.TrainConfig
     train_config: Callable[[Any, str, int, str], Any]
-    # (P, protocol) -> None, or fresh(epoch) -> SequenceData: the training split drawn anew every epoch
-    fresh_training: Callable[[Any, str], Any] = no_fresh_training
+    # (P, protocol, training Noise) -> None, or fresh(epoch) -> SequenceData: the training split drawn anew
+    # every epoch
+    fresh_training: Callable[[Any, str, Any], Any] = no_fresh_training
     noise_name: str = "noise"      # the noise parameter's name on axes ("p" alone reads as a dropout rate)
     target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
     target_unit: str = ""          # its unit, on axes

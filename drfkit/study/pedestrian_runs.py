@@ -138,9 +138,9 @@ def pedestrian_data(P, split: str, noise: Noise | float | None = None, protocol:
                         torch.from_numpy(seqs["mask"]))
 
 
-def pedestrian_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+def pedestrian_data_key(P, protocol: str = "paper", noise_kind: str = "salt_and_pepper") -> dict[str, Any]:
     PEDESTRIANS.check_protocol(protocol)
-    return {k: getattr(P, k) for k in DATA_KEYS}
+    return {k: getattr(P, k) for k in DATA_KEYS} | ({"noise_kind": noise_kind} if noise_kind != "salt_and_pepper" else {})
 
 
 _TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once

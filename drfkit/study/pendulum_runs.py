@@ -22,10 +22,16 @@ SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
 PROFILE_SCHEDULE = ("epochs", "lr", "batch_size", "patience")
 
 
+def _noise(P, noise: Noise | float | None) -> Noise:
+    """A ``Noise`` as given (any kind with a corruption of pendulum frames: the registry entry that
+    calls decides), or a level of the benchmark's noise (None: the training level)."""
+    return noise if isinstance(noise, Noise) else PENDULUM.noise(noise, P)
+
+
 def pendulum_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
     """Arrays of a pendulum split; ``noise`` a ``Noise`` or its max noise level (default: the training noise)."""
     n = {"train": P.pend_train_sequences, "val": P.pend_val_sequences, "test": P.pend_test_sequences}[split]
-    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, PENDULUM.noise(noise, P),
+    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, _noise(P, noise),
                          P.pend_data_seed + SPLIT_SEED_OFFSET[split])
 
 
@@ -44,9 +50,11 @@ def _as_data(arrays: dict[str, Any]) -> SequenceData:
     return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
 
 
-def pendulum_data_key(P, protocol: str = "paper") -> dict[str, Any]:
+def pendulum_data_key(P, protocol: str = "paper", noise_kind: str = "rkn_uniform") -> dict[str, Any]:
     key = {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
                                         "pend_train_max_noise", "pend_data_seed")}
+    # frames under another kind of noise are other data; the benchmark's kind keeps the names it had
+    key |= {"noise_kind": noise_kind} if noise_kind != "rkn_uniform" else {}
     spec = protocol_spec(protocol, "drf")
     # a run trained on other frames is another run: since generator 2 (the benchmark's own frames) the
     # generator enters the key; runs on the first generator's frames keep the names they had
@@ -97,7 +105,7 @@ def pendulum_fresh_training(P, protocol: str, noise: Noise | float | None = None
     spec = protocol_spec(protocol, "drf")
     if not spec["train"].get("fresh_noise"):
         return None
-    clean, level = pendulum_split(P, "train", noise), PENDULUM.noise(noise, P)
+    clean, level = pendulum_split(P, "train", noise), _noise(P, noise)
 
     def fresh(epoch: int) -> SequenceData:
         return _as_data(redraw_noise(clean, level, fresh_noise_seed(P.pend_data_seed, epoch), spec["blackouts"]))

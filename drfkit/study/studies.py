@@ -17,6 +17,7 @@ from typing import Any
 import pandas as pd
 
 from drfkit.study import registry
+from drfkit.study.entry import no_fresh_training
 from drfkit.data.noise import Noise
 from drfkit.util.io import atomic_write_csv, param_hash
 from drfkit.util.paths import models_dir, tables_dir
@@ -36,12 +37,14 @@ def study_noise(P, study: str, noise: Noise | float | None = None) -> Noise:
 
 def study_data(P, study: str, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
     """A split of any study (``drfkit.study.registry``) under ``noise`` (``study_noise``; default: the training noise)."""
-    return registry.study(study).data(P, split, noise, protocol)
+    entry = registry.study(study)
+    return entry.data(P, split, entry.noise(noise, P), protocol)
 
 
 def study_data_key(P, study: str, protocol: str = "paper") -> dict[str, Any]:
     """What names a study's training and validation data in checkpoint hashes."""
-    return registry.study(study).data_key(P, protocol)
+    entry = registry.study(study)
+    return entry.data_key(P, protocol, entry.noise_kind)
 
 
 def study_models(P, study: str) -> list[str]:
@@ -67,7 +70,10 @@ def train_config(P, study: str, kind: str, seed: int, protocol: str = "paper") -
 
 def fresh_training(P, study: str, protocol: str):
     """None, or ``fresh(epoch) -> SequenceData`` when ``protocol`` redraws the training data every epoch."""
-    return registry.study(study).fresh_training(P, protocol)
+    entry = registry.study(study)
+    if entry.fresh_training is no_fresh_training:  # a study that never redraws needs no training noise
+        return None
+    return entry.fresh_training(P, protocol, entry.noise(None, P))
 
 
 def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper",

@@ -176,7 +176,9 @@ save_table(P.profile, "pedestrians_monoloco_inputs", inputs_summary)
 inputs_summary.pivot(index="model", columns="noise", values="mae").round(3)
 
 # %%
+# NBVAL_IGNORE_OUTPUT
 reading = claims.monoloco_inputs_reading(inputs_summary, P.ped_train_p)
+assert reading["text"]
 print(reading["text"])
 
 # %% [markdown]
