@@ -61,12 +61,12 @@ HEADLINE_FIGURES = [
 
 
 def epoch_times_line(epochs: pd.DataFrame) -> str:
-    """One sentence of a ``drfkit.methods.timing.epoch_times`` table (notebook 01); the first row is the base."""
+    """One sentence of a ``drfkit.methods.timing.epoch_times`` table (notebook 04); the first row is the base."""
     base = epochs["model"].iloc[0]
     rows = epochs.set_index("model")
     others = [f"{model} **{row[f'ratio_to_{base}']:.2f}×** (IQR {row[f'ratio_to_{base}_iqr']:.2f}; "
               f"{row['epoch_median_s']:.3g} s)" for model, row in rows.iloc[1:].iterrows()]
-    return (f"Whole training epochs in notebook 01 (the training loop itself, validation and checkpoints "
+    return (f"Whole training epochs in notebook 04 (the training loop itself, validation and checkpoints "
             f"included, {int(rows['rounds'].iloc[0])} interleaved rounds, {int(rows['threads'].iloc[0])} torch "
             f"thread(s), {int(rows['sequences'].iloc[0])} sequences): against a {base} epoch of "
             f"{rows.loc[base, 'epoch_median_s']:.3g} s, " + ", ".join(others) + "; target ≤ 1.5× for the DRF "
@@ -74,7 +74,7 @@ def epoch_times_line(epochs: pd.DataFrame) -> str:
 
 
 def recursion_scaling_line(scaling: pd.DataFrame) -> str:
-    """One sentence per thread count of a ``drfkit.methods.timing.recursion_scaling`` table (notebook 01)."""
+    """One sentence per thread count of a ``drfkit.methods.timing.recursion_scaling`` table (notebook 04)."""
     parts = []
     for threads, rows in scaling.groupby("threads"):
         step = rows[(rows["model"] == "drf") & (rows["part"] == "step")].iloc[0]
@@ -277,7 +277,7 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                 notes.append(f"its counted arithmetic is {drf['flop_ratio_to_no_dynamics']:.2f}× a no_dynamics step's "
                              f"({drf['gflop']:.3g} against {nd['gflop']:.3g} GFLOP of matrix products and "
                              f"convolutions), run at {drf['gflop_per_s'] / nd['gflop_per_s']:.2f}× its rate")
-            lines += [f"Pendulum training speed in notebook 01 (one run, {int(sp['threads'].iloc[0])} torch "
+            lines += [f"Pendulum training speed in notebook 04 (one run, {int(sp['threads'].iloc[0])} torch "
                       f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
                       f"costs **{drf['ratio_to_no_dynamics']:.2f}×** a no_dynamics step ("
                       + "; ".join(notes) + "; `tables/pendulum_training_speed.csv`).", ""]

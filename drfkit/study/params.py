@@ -240,7 +240,7 @@ NOTEBOOKS: dict[str, list[str]] = {
     "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
     "02_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
     "03_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
-    "04_timing": _COMMON + ["n_samples"] + _TIMING,
+    "04_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
     "05_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }
 
