@@ -311,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m drfkit bench", description=main.__doc__)
     ap.add_argument("--profile", default="quick", help="a profile name in params/ or a YAML path")
     args = ap.parse_args(argv)
-    P = notebook_params("04_timing", load_profile(args.profile))
+    P = notebook_params("bench", load_profile(args.profile))
     if P["threads"]:
         torch.set_num_threads(P["threads"])
     table = inference_benchmark(P["n_samples"], P["timing_batch_sizes"], P["timing_threads"],

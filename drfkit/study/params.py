@@ -245,6 +245,21 @@ NOTEBOOKS: dict[str, list[str]] = {
 }
 
 
+# what a command line reads when it needs less than a notebook's whole set: the inference benchmark
+# (``python -m drfkit bench``) reads notebook 04's timing keys, not the pendulum's that its training-speed
+# part needs
+COMMANDS: dict[str, list[str]] = {"bench": _COMMON + ["n_samples"] + _TIMING}
+
+
+def _key_set(name: str) -> list[str]:
+    """The parameters of a notebook (``NOTEBOOKS``) or a command (``COMMANDS``)."""
+    if name in NOTEBOOKS:
+        return NOTEBOOKS[name]
+    if name in COMMANDS:
+        return COMMANDS[name]
+    raise ParameterError(f"unknown notebook {name!r}; known: {sorted(NOTEBOOKS)} (and commands {sorted(COMMANDS)})")
+
+
 class Params(types.SimpleNamespace):
     """Validated parameters of one notebook; attribute access, plus ``as_dict()``."""
 
@@ -298,10 +313,8 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
     Every key of ``notebook`` must be present (the parameters cell defines them all);
     any other key is an error.
     """
-    if notebook not in NOTEBOOKS:
-        raise ParameterError(f"unknown notebook {notebook!r}; known: {sorted(NOTEBOOKS)}")
-    allowed_keys = NOTEBOOKS[notebook]
-    where = f"notebook {notebook}"
+    allowed_keys = _key_set(notebook)
+    where = f"notebook {notebook}" if notebook in NOTEBOOKS else f"python -m drfkit {notebook}"
     unknown = sorted(set(values) - set(allowed_keys))
     if unknown:
         raise ParameterError(
@@ -449,12 +462,13 @@ def parse_overrides(items: list[str] | None) -> dict:
 
 
 def notebook_params(notebook: str, profile_values: dict[str, Any]) -> dict[str, Any]:
-    """The subset of a profile that ``notebook`` declares, validated (raises on error)."""
-    subset = {k: profile_values[k] for k in NOTEBOOKS[notebook] if k in profile_values}
-    missing = [k for k in NOTEBOOKS[notebook] if k not in subset]
+    """The subset of a profile that ``notebook`` (or a command of ``COMMANDS``) declares, validated (raises on error)."""
+    keys = _key_set(notebook)
+    subset = {k: profile_values[k] for k in keys if k in profile_values}
+    missing = [k for k in keys if k not in subset]
     if missing:
-        raise ParameterError(f"profile lacks parameter(s) {', '.join(_named(k) for k in missing)} "
-                             f"needed by notebook {notebook}")
+        user = f"notebook {notebook}" if notebook in NOTEBOOKS else f"python -m drfkit {notebook}"
+        raise ParameterError(f"profile lacks parameter(s) {', '.join(_named(k) for k in missing)} needed by {user}")
     validate(notebook, subset)
     return subset
 
