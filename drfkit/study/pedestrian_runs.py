@@ -23,8 +23,7 @@ import torch
 
 from drfkit.data import nuscenes
 from drfkit.data.noise import Noise, check_noise
-from drfkit.data.records import check_records
-from drfkit.data.records import make_sequences, split_by_scene
+from drfkit.data.records import check_records, make_sequences, split_by_scene
 from drfkit.data.sequence_data import SequenceData
 from drfkit.data.sim_detector import DetectorConfig, simulate_records
 from drfkit.data.sim_world import simulate_truth
@@ -140,7 +139,9 @@ def pedestrian_data(P, split: str, noise: Noise | float | None = None, protocol:
 
 def pedestrian_data_key(P, protocol: str = "paper", noise_kind: str = "salt_and_pepper") -> dict[str, Any]:
     PEDESTRIANS.check_protocol(protocol)
-    return {k: getattr(P, k) for k in DATA_KEYS} | ({"noise_kind": noise_kind} if noise_kind != "salt_and_pepper" else {})
+    # records under another kind of noise are other data; the paper's kind keeps the names it had
+    other_kind = {"noise_kind": noise_kind} if noise_kind != "salt_and_pepper" else {}
+    return {k: getattr(P, k) for k in DATA_KEYS} | other_kind
 
 
 _TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once
@@ -186,5 +187,6 @@ PEDESTRIANS = Study(
     model_options=pedestrian_model_options, train_config=pedestrian_train_config,
     noise_name="salt-and-pepper p", target_name="depth", target_unit="(m)")
 
-__all__ = ["PEDESTRIANS", "SIMULATOR_VERSION", "load_pedestrians", "load_simulated_pedestrians", "pedestrian_data", "pedestrian_data_key", "pedestrian_model_options", "pedestrian_records",
-           "pedestrian_split", "pedestrian_train_config", "target_statistics"]
+__all__ = ["PEDESTRIANS", "SIMULATOR_VERSION", "load_pedestrians", "load_simulated_pedestrians", "pedestrian_data",
+           "pedestrian_data_key", "pedestrian_model_options", "pedestrian_records", "pedestrian_split",
+           "pedestrian_train_config", "target_statistics"]
