@@ -2,6 +2,7 @@
 epistemic parts and a padded mask goes through ``evaluate_model_rates``; every metric is checked
 against a value computed here by hand from the TOTAL sigma. Handing the metrics ``pred.aleatoric``
 (or ignoring the mask) fails this."""
+from drfkit.study.profile import build_profile
 import math
 
 import numpy as np
@@ -68,7 +69,7 @@ def _stub_study(monkeypatch, tmp_path):
         torch.zeros(2, 3, 17, 3), targets, mask))
     monkeypatch.setattr(studies, "pick_device", lambda device: torch.device("cpu"))
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    P = types.SimpleNamespace(n_samples=8, interval_level=0.95, profile="stub", device="cpu")
+    P = build_profile(dict(n_samples=8, interval_level=0.95, profile="stub", device="cpu"), "a test")
     model = types.SimpleNamespace(default_dropout_p=0.1)
     return P, {("drf", 0): model}
 

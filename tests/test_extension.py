@@ -99,7 +99,7 @@ def test_a_noise_kind_registered_in_the_test_makes_its_own_data_and_runs(monkeyp
     P = for_notebook("01_pendulum_training", values)
     gaussian, benchmark = (studies.study_data(P, s, "test", 0.3) for s in ("pendulum_gaussian", "pendulum"))
     assert not torch.equal(gaussian.inputs, benchmark.inputs) and torch.equal(gaussian.targets, benchmark.targets)
-    frames = pendulum.generate_pendulum(2, 6, noise_module.Noise("toy_gaussian", 0.3), seed=P.pend_data_seed + 2)
+    frames = pendulum.generate_pendulum(2, 6, noise_module.Noise("toy_gaussian", 0.3), seed=P.pendulum.data_seed + 2)
     assert np.array_equal(gaussian.inputs.numpy(), frames["images"])  # the registered corruption made them
     assert studies.study_data_key(P, "pendulum_gaussian")["noise_kind"] == "toy_gaussian"
     assert "noise_kind" not in studies.study_data_key(P, "pendulum")  # the benchmark's runs keep their names

@@ -3,6 +3,7 @@ threshold choice on validation data only, and gated inference (MC dropout on sel
 deterministic elsewhere) against the no-dropout and always-dropout results."""
 from __future__ import annotations
 
+from drfkit.study.profile import build_profile
 import inspect
 import math
 from types import SimpleNamespace
@@ -170,8 +171,8 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
     # the study's data is its registry entry's callable
     monkeypatch.setitem(registry.STUDIES, "pedestrians", dataclasses.replace(registry.STUDIES["pedestrians"], data=fake_data))
-    P = SimpleNamespace(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
-                        gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95)
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
+                           gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95), "a test")
     out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
                                     min_run_time=0.001)
     assert [(split, noise.level) for split, noise in served] == [("val", 0.05), ("test", 0.05)]

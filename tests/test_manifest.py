@@ -35,7 +35,7 @@ def test_start_notebook_validates_and_records(results):
     quick = load_profile("quick")
     namespace = {k: quick[k] for k in NOTEBOOKS["04_timing"]} | {"profile": "nb"}
     params, timer = start_notebook("04_timing", dict(namespace, json=json))  # modules are not parameters
-    assert params.n_samples == quick["n_samples"]
+    assert params.uncertainty.n_samples == quick["n_samples"]
     entry = read_manifest("nb")["notebooks"]["04_timing"]
     assert entry["params"]["seeds"] == quick["seeds"]
 

@@ -99,7 +99,7 @@ def test_eval_studies_must_be_a_subset_of_the_studies(value):
     with pytest.raises(ParameterError, match="eval_studies"):
         validate("03_ood_noise_evaluation", values)
     ok = validate("05_competency_gating", quick_subset("05_competency_gating") | {"eval_studies": ["pedestrians"]})
-    assert ok.eval_studies == ["pedestrians"]
+    assert ok.evaluation.studies == ["pedestrians"]
 
 
 def test_missing_parameter_is_reported():
@@ -211,7 +211,7 @@ def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path
     with pytest.raises(ParameterError, match=r"'pifpaf_predictions' \[pedestrians\.pifpaf_predictions\] = .*absent' is not a folder"):
         validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path)
-    assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).ped_source == "nuscenes"
+    assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).pedestrians.source == "nuscenes"
 
 
 def test_keep_outputs_copies_outputs_only_of_unchanged_code_cells(tmp_path):

@@ -51,7 +51,7 @@ def test_paper_protocol_keeps_its_checkpoint_names_and_book_differs(tmp_path, mo
     for kind in ("drf", "lstm", "no_dynamics"):
         assert studies.checkpoint_stem(P, "pendulum", kind, 0, "book") != studies.checkpoint_stem(P, "pendulum", kind, 0)
     cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
-    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pend_book_epochs, P.pend_book_lr, P.pend_book_batch_size)
+    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pendulum.book.epochs, P.pendulum.book.lr, P.pendulum.book.batch_size)
     with pytest.raises(ValueError, match="pedestrians study has no training protocol 'blackout'"):
         studies.model_config("pedestrians", "drf", None, "blackout")
 

@@ -169,7 +169,8 @@ def test_every_registered_study_is_wired_end_to_end():
     knows (and its training notebook accepts), a training notebook, and model kinds that build."""
     from drfkit.study import studies
     from drfkit.models import MODEL_CLASSES
-    from drfkit.study.params import NOTEBOOKS, SPECS
+    from drfkit.study.params import NOTEBOOKS
+    from drfkit.study.schema import flat_name
     from drfkit.data.noise import NOISE_KINDS, Noise
     from drfkit.study.registry import STUDIES
 
@@ -178,44 +179,46 @@ def test_every_registered_study_is_wired_end_to_end():
         assert "paper" in s.all_protocols, name
         assert s.training_notebook in NOTEBOOKS, name
         keys = [s.models_key, s.train_level_key, s.eval_levels_key, s.sweep_key, s.protocols_key]
-        assert all(k in SPECS for k in keys), (name, [k for k in keys if k not in SPECS])
-        assert all(k in NOTEBOOKS[s.training_notebook] for k in (s.models_key, s.train_level_key)), name
+        names = [flat_name(s.section, k) for k in keys]  # raises for a key the schema's section lacks
+        assert all(n in NOTEBOOKS[s.training_notebook] for n in names[:2]), name
         assert set(s.kinds) <= set(MODEL_CLASSES), name
         assert studies.TRAINING_NOTEBOOK[name] == s.training_notebook
         assert s.noise_kind in NOISE_KINDS and s.noise(0.1) == Noise(s.noise_kind, 0.1), name
 
 
 def profile_reads(source: str, names: set[str]) -> list[str]:
-    """Every ``P.<name>`` in ``source`` where ``name`` is a profile parameter (``params.SPECS``): how
-    the book reads its profile ``P`` (a covariance called P has ``P.shape``, no profile names)."""
+    """Every ``P.<name>`` in ``source`` where ``name`` is a field of the typed profile (a section such as
+    ``pendulum`` or a top-level parameter such as ``seeds``): how the book reads its profile ``P`` (a
+    covariance called P has ``P.shape``, no profile names)."""
     return [f"{node.lineno}: P.{node.attr}" for node in ast.walk(ast.parse(source))
             if isinstance(node, ast.Attribute) and node.attr in names and isinstance(node.value, ast.Name)
             and node.value.id == "P"]
 
 
 def test_profile_reader_known_answer():
-    source = "def f(P, z, p):\n    return P.pend_lr + z.pend_lr + P.shape[0] + p.n_samples\n"
-    assert profile_reads(source, {"pend_lr", "n_samples"}) == ["2: P.pend_lr"]
+    source = "def f(P, z, p):\n    return P.pendulum.lr + z.pendulum.lr + P.shape[0] + p.uncertainty.n_samples\n"
+    assert profile_reads(source, {"pendulum", "uncertainty"}) == ["2: P.pendulum"]
 
 
 def test_nothing_below_the_study_layer_reads_the_profile():
     """Methods, models, data, core and util take explicit arguments: no module there reads a
-    profile parameter off the profile (``P.pend_lr``); the study and book layers are its readers."""
-    from drfkit.study.params import SPECS
+    profile parameter off the profile (``P.pendulum.lr``); the study and book layers are its readers."""
+    import dataclasses
+
+    from drfkit.study.profile import Profile
 
     below = [p for p in PACKAGE.rglob("*.py") if layer_of(module_name(p)) in
              {name for name, rank in LAYERS.items() if rank < LAYERS["study"]}]
     assert len(below) > 20, "the layers below the study layer were not found"
-    reads = [f"{module_name(p)}:{r}" for p in below for r in profile_reads(p.read_text(encoding="utf-8"), set(SPECS))]
+    reads = [f"{module_name(p)}:{r}" for p in below for r in profile_reads(p.read_text(encoding="utf-8"), {f.name for f in dataclasses.fields(Profile)})]
     assert not reads, "the profile read below the study layer: " + "; ".join(reads)
 
 
 def test_the_registry_says_which_levels_and_models_a_claim_sees():
-    from types import SimpleNamespace
-
+    from drfkit.study.profile import build_profile
     from drfkit.study.registry import STUDIES
 
-    P = SimpleNamespace(pend_eval_max_noise=[0.5, 0.75], pend_train_max_noise=0.5, pend_models=["drf", "lstm"],
-                        ped_eval_p=[0.01, 0.025, 0.05], ped_train_p=0.01, ped_models=["monoloco", "drf"])
+    P = build_profile(dict(pend_eval_max_noise=[0.5, 0.75], pend_train_max_noise=0.5, pend_models=["drf", "lstm"],
+                           ped_eval_p=[0.01, 0.025, 0.05], ped_train_p=0.01, ped_models=["monoloco", "drf"]), "a test")
     assert STUDIES["pendulum"].shifted_levels(P) == [0.75] and STUDIES["pendulum"].baselines(P) == ["lstm"]
     assert STUDIES["pedestrians"].shifted_levels(P) == [0.025, 0.05] and STUDIES["pedestrians"].baselines(P) == ["monoloco"]

@@ -30,7 +30,7 @@ def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_pr
     # the notebook's call trains the rest and reuses this one without training it again
     mtime = stem.with_name(stem.name + "-best.pt").stat().st_mtime_ns
     results = studies.train_models(P, "pendulum", progress=False)
-    assert set(results) == {(k, s) for k in P.pend_models for s in P.seeds}
+    assert set(results) == {(k, s) for k in P.pendulum.models for s in P.seeds}
     assert stem.with_name(stem.name + "-best.pt").stat().st_mtime_ns == mtime
     assert (tmp_path / "results" / "tiny" / "tables" / "pendulum_training_curves.csv").exists()
 
@@ -80,14 +80,14 @@ def test_monoloco_trains_on_its_published_schedule_and_the_family_on_the_profile
     P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile)))
     mono = studies.train_config(P, "pedestrians", "monoloco", 0)
     assert (mono.lr_step, mono.lr_gamma, mono.framewise, mono.grad_clip, mono.select_on) == (20, 0.9, True, None, "l1")
-    assert (mono.epochs, mono.lr, mono.batch_size) == (P.monoloco_epochs, P.monoloco_lr, P.monoloco_batch_size)
+    assert (mono.epochs, mono.lr, mono.batch_size) == (P.monoloco.epochs, P.monoloco.lr, P.monoloco.batch_size)
     drf = studies.train_config(P, "pedestrians", "drf", 0)
-    assert (drf.grad_clip, drf.select_on, drf.lr_step, drf.lr) == (10.0, "loss", None, P.ped_lr)
+    assert (drf.grad_clip, drf.select_on, drf.lr_step, drf.lr) == (10.0, "loss", None, P.pedestrians.lr)
     # the book's protocol: the DRF family on beta-NLL with cosine decay, selected on the validation MAE;
     # Monoloco on its published schedule in every protocol, so its runs are one set
     book = studies.train_config(P, "pedestrians", "lstm", 0, "book")
     assert (book.objective, book.beta, book.lr_schedule, book.select_on) == ("beta_nll", 1.0, "cosine", "l1")
-    assert (book.epochs, book.lr, book.batch_size) == (P.ped_epochs, P.ped_lr, P.ped_batch_size)
+    assert (book.epochs, book.lr, book.batch_size) == (P.pedestrians.epochs, P.pedestrians.lr, P.pedestrians.batch_size)
     assert studies.train_config(P, "pedestrians", "monoloco", 0, "book") == mono
     assert studies.checkpoint_stem(P, "pedestrians", "monoloco", 1, "book") == \
         studies.checkpoint_stem(P, "pedestrians", "monoloco", 1)
@@ -141,7 +141,7 @@ def test_a_study_takes_its_own_noise_kind_or_a_level(tiny_profile):
     from drfkit.data.noise import Noise
 
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
-    assert studies.study_noise(P, "pendulum") == Noise("rkn_uniform", P.pend_train_max_noise)
+    assert studies.study_noise(P, "pendulum") == Noise("rkn_uniform", P.pendulum.train_max_noise)
     assert studies.study_noise(P, "pendulum", 0.75) == Noise("rkn_uniform", 0.75)
     assert studies.study_noise(P, "pedestrians", Noise("salt_and_pepper", 0.05)).level == 0.05
     with pytest.raises(ValueError, match="takes salt_and_pepper noise"):
@@ -162,7 +162,7 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
     assert (cfg.objective, cfg.beta, cfg.lr_schedule, cfg.window, cfg.select_on, cfg.prior_weight) == \
         ("beta_nll", 1.0, "cosine", 25, "l1", 1.0)
-    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pend_book_epochs, P.pend_book_lr, P.pend_book_batch_size)
+    assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pendulum.book.epochs, P.pendulum.book.lr, P.pendulum.book.batch_size)
     assert studies.train_config(P, "pendulum", "lstm", 0, "book").prior_weight == 0.0
     assert studies.train_config(P, "pendulum", "drf", 0, "paper").objective == "model"
     fresh = studies.fresh_training(P, "pendulum", "book")

@@ -23,13 +23,13 @@ SRC, OUT = ROOT / "notebooks" / "src", ROOT / "notebooks"
 def parameters_cell(notebook: str) -> str:
     """The notebook's parameters, with the quick profile's values (what nbval runs)."""
     sys.path.insert(0, str(ROOT))
-    from drfkit.study.params import NOTEBOOKS, PATHS, SPECS, load_profile
+    from drfkit.study.params import NOTEBOOKS, PATHS, SPECS, allowed_text, load_profile
 
     quick = load_profile("quick")
     lines = ["# Defaults = the quick profile (params/quick.yaml); papermill overrides them.",
              "# Each name's place in a profile's sections is in brackets."]
     for key in NOTEBOOKS[notebook]:
-        lines += [f"# {key} [{'.'.join(PATHS[key])}]: {SPECS[key].allowed}", f"{key} = {quick[key]!r}"]
+        lines += [f"# {key} [{'.'.join(PATHS[key])}]: {allowed_text(key)}", f"{key} = {quick[key]!r}"]
     return "\n".join(lines)
 
 

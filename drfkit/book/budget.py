@@ -19,7 +19,8 @@ import torch
 
 from drfkit.study import registry, studies
 from drfkit.util.io import atomic_write_csv, torch_load_checked
-from drfkit.study.params import Params, load_profile, notebook_params
+from drfkit.study.params import load_profile, notebook_params
+from drfkit.study.profile import build_profile
 from drfkit.util.paths import results_dir
 from drfkit.methods.timing.training import training_step_times
 from drfkit.methods.train import run_finished
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     values = load_profile(args.profile)
     keys = set().union(*(notebook_params(s.training_notebook, values) for s in registry.STUDIES.values()))
-    P = Params(**{k: values[k] for k in keys})
+    P = build_profile({k: values[k] for k in keys}, "python -m drfkit budget")
     if args.threads or P.threads:
         torch.set_num_threads(args.threads or P.threads)
     table = training_budget(P, args.min_run_time)

@@ -39,6 +39,8 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
+from drfkit.study.profile import ProfileSection
+
 from drfkit.util.io import atomic_write_text, from_data, param_hash, to_data
 from drfkit.book.manifest import cpu_name, note_reused, reused_measurements as reused
 from drfkit.util.paths import REPO_ROOT, results_dir
@@ -77,7 +79,7 @@ def fingerprint(obj: Any) -> Any:
 
     Plain values stay as they are; tensors and arrays become the sha256 of dtype, shape and
     bytes; a module the sha256 of its class, configuration, mode and state dict; mappings,
-    sequences, dataclasses and namespaces (``Params``) are taken apart recursively. Anything else
+    sequences, dataclasses, namespaces and the typed profile (its declared parameters) are taken apart recursively. Anything else
     (a function, an open file) raises ``TypeError``: its content cannot be keyed, so its result
     must not be cached.
     """
@@ -110,6 +112,8 @@ def fingerprint(obj: Any) -> Any:
         return {type(obj).__name__: [fingerprint(v) for v in obj]}
     if isinstance(obj, (set, frozenset)):
         return {"set": sorted((fingerprint(v) for v in obj), key=repr)}
+    if isinstance(obj, ProfileSection):  # the typed profile: its declared parameters (an undeclared one cannot be read)
+        return {"profile": fingerprint(obj.declared())}
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         fields = {f.name: fingerprint(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
         return {"dataclass": f"{type(obj).__module__}.{type(obj).__qualname__}", "fields": fields}

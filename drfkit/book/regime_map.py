@@ -44,7 +44,7 @@ def write_outputs(P, table: pd.DataFrame) -> pd.DataFrame:
     summary = regime_summary(table)
     save_table(P.profile, "pendulum_regime_map", table)
     save_table(P.profile, "pendulum_regime_summary", summary)
-    save_figure(P.profile, "pendulum_regime_map", plot_regime(table, P.pend_models))
+    save_figure(P.profile, "pendulum_regime_map", plot_regime(table, P.pendulum.models))
     return summary
 
 

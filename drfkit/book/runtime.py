@@ -8,13 +8,15 @@ from typing import Any
 
 from drfkit.util.device import setup
 from drfkit.book.manifest import NotebookTimer
-from drfkit.study.params import Params, notebook_globals, validate
+from drfkit.study.params import notebook_globals, validate
+from drfkit.study.profile import Profile
 
 
-def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Params, NotebookTimer]:
+def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Profile, NotebookTimer]:
     """Validate the parameters defined in ``namespace`` (a notebook's ``globals()``).
 
-    Returns the validated parameters and a timer whose ``finish()`` the notebook's last
+    Returns the validated parameters as the typed profile (``P.pendulum.epochs``; the flat names
+    exist only in the parameters cell) and a timer whose ``finish()`` the notebook's last
     cell calls. Deterministic algorithms are requested so that a seed fixes the result
     on CPU.
     """

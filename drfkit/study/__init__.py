@@ -1,5 +1,6 @@
 """Layer 5, study: the book's studies, the readers of the profile ``P`` (with ``drfkit.book``): the
-study registry (``registry``, its entries ``entry.Study``), the profile's schema (``params``), each
+study registry (``registry``, its entries ``entry.Study``), the profile's schema (``schema``), the typed
+profile made from it (``profile``), loading and validating a profile (``params``), each
 study's data and runs (``pendulum_runs``, ``pedestrian_runs``), naming, training and loading them
 (``studies``), evaluation over seeds (``evaluate``), the dynamics study (``dynamics``), the
 protocol ablation (``ablation``), the noise-regime map (``regime``), gating on test data
@@ -15,6 +16,6 @@ from __future__ import annotations
 from drfkit.util.lazy import lazy_modules
 
 __all__ = ['ablation', 'bench', 'claims', 'dynamics', 'entry', 'evaluate', 'gating_study', 'paper', 'params',
-           'pedestrian_runs', 'pendulum_runs', 'regime', 'registry', 'sim_stats', 'studies']
+           'pedestrian_runs', 'pendulum_runs', 'profile', 'regime', 'registry', 'schema', 'sim_stats', 'studies']
 
 __getattr__ = lazy_modules(__name__, __all__)

@@ -305,20 +305,20 @@ def main(argv: list[str] | None = None) -> int:
     benchmark with the profile's n_samples and timing_* keys, print the table and write
     results/<profile>/timing.csv."""
     from drfkit.util.io import atomic_write_csv
-    from drfkit.study.params import load_profile, notebook_params
+    from drfkit.study.params import for_notebook, load_profile
     from drfkit.util.paths import results_dir
 
     ap = argparse.ArgumentParser(prog="python -m drfkit bench", description=main.__doc__)
     ap.add_argument("--profile", default="quick", help="a profile name in params/ or a YAML path")
     args = ap.parse_args(argv)
-    P = notebook_params("bench", load_profile(args.profile))
-    if P["threads"]:
-        torch.set_num_threads(P["threads"])
-    table = inference_benchmark(P["n_samples"], P["timing_batch_sizes"], P["timing_threads"],
-                                P["timing_min_run_time"], P["device"], seed=P["seeds"][0],
+    P = for_notebook("bench", load_profile(args.profile))
+    if P.threads:
+        torch.set_num_threads(P.threads)
+    table = inference_benchmark(P.uncertainty.n_samples, P.timing.batch_sizes, P.timing.threads,
+                                P.timing.min_run_time, P.device, seed=P.seeds[0],
                                 progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
     with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
         print(table.to_string(index=False, float_format=lambda v: "nan" if math.isnan(v) else f"{v:.4g}"))
-    path = atomic_write_csv(results_dir(P["profile"]) / "timing.csv", table)
+    path = atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
     print(f"wrote {path}")
     return 0

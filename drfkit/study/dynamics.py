@@ -37,13 +37,13 @@ from drfkit.util.progress import steps
 def blackout_split(P, split: str) -> dict[str, np.ndarray]:
     """A pendulum split at the training noise with its ``blackout_frames`` pure noise."""
     arrays = studies.pendulum_split(P, split)
-    seed = P.pend_data_seed + studies.SPLIT_SEED_OFFSET[split] + BLACKOUT_SEED_OFFSET
+    seed = P.pendulum.data_seed + studies.SPLIT_SEED_OFFSET[split] + BLACKOUT_SEED_OFFSET
     return with_blackout(arrays, *blackout_frames(arrays["images"].shape[1]), seed=seed)
 
 
 def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """MC-dropout mean and total sigma of ``model`` on arrays['images'] (any model input), seeded."""
-    pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.n_samples,
+    pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
                                 dropout_rates=[None], seed=seed, batch_size=256)[0]
     return pred.mean.numpy(), pred.total.numpy()
 
@@ -217,7 +217,7 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
                 if err < best[0]:
                     best = (err, scale, accel)
         _, scale, accel = best
-        for p in P.ped_eval_p:
+        for p in P.pedestrians.eval_p:
             seqs = studies.pedestrian_split(P, "test", p)
             mean, sigma = _depth_predictions(P, model, seqs["inputs"], seed)
             est = oracle.constant_velocity_filter(mean, scale * sigma, seqs["mask"], dt=_seconds(seqs), accel_std=accel)

@@ -30,13 +30,14 @@ class Study:
     input_kind: str                # the models' input: 'pendulum' images or 'keypoints'
     out_dim: int                   # outputs per frame
     kinds: tuple[str, ...]         # every model kind the study can train (a profile picks a subset)
-    models_key: str                # profile key: the models a profile trains
-    train_level_key: str           # profile key: the training noise
-    eval_levels_key: str           # profile key: the test noise levels of the paper's tables
-    sweep_key: str                 # profile key: the noise sweep of notebook 03
+    section: str                   # the profile's section of the study (P.<section>, drfkit.study.profile)
+    models_key: str                # key in that section: the models a profile trains
+    train_level_key: str           # key in that section: the training noise
+    eval_levels_key: str           # key in that section: the test noise levels of the paper's tables
+    sweep_key: str                 # key in that section: the noise sweep of notebook 03
     training_notebook: str         # the notebook that trains the study's models
     noise_kind: str                # drfkit.data.noise.NOISE_KINDS: what the study's noise levels mean
-    protocols_key: str             # profile key: the training protocols (a list that holds 'paper')
+    protocols_key: str             # key in that section: the training protocols (a list that holds 'paper')
     all_protocols: tuple[str, ...]  # every protocol the study knows (a profile picks a subset)
     # (P, split, noise: Noise, protocol) -> SequenceData (``drfkit.study.studies.study_data`` makes the Noise)
     data: Callable[..., Any]
@@ -53,11 +54,15 @@ class Study:
     target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
     target_unit: str = ""          # its unit, on axes
 
+    def _get(self, P, key: str) -> Any:
+        """``P.<section>.<key>``: a value of the study's section of the typed profile."""
+        return getattr(getattr(P, self.section), key)
+
     def models(self, P) -> list[str]:
-        return list(getattr(P, self.models_key))
+        return list(self._get(P, self.models_key))
 
     def train_level(self, P) -> float:
-        return float(getattr(P, self.train_level_key))
+        return float(self._get(P, self.train_level_key))
 
     def noise(self, level: "float | Noise | None", P=None) -> Noise:
         """The study's ``Noise`` at ``level`` (None: the profile's training level; a ``Noise`` must be
@@ -71,7 +76,7 @@ class Study:
         return Noise(self.noise_kind, level)
 
     def eval_levels(self, P) -> list[float]:
-        return [float(v) for v in getattr(P, self.eval_levels_key)]
+        return [float(v) for v in self._get(P, self.eval_levels_key)]
 
     def shifted_levels(self, P) -> list[float]:
         """The test levels out of distribution: the paper's levels above the training noise (what C3
@@ -83,10 +88,10 @@ class Study:
         return [kind for kind in self.models(P) if kind != "drf"]
 
     def sweep_levels(self, P) -> list[float]:
-        return [float(v) for v in getattr(P, self.sweep_key)]
+        return [float(v) for v in self._get(P, self.sweep_key)]
 
     def protocols(self, P) -> list[str]:
-        return list(getattr(P, self.protocols_key))
+        return list(self._get(P, self.protocols_key))
 
     def check_protocol(self, protocol: str) -> str:
         """``protocol`` if the study knows it, else a ValueError naming the ones it does."""

@@ -113,8 +113,8 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
         data = studies.study_data(P, study, "test", noise)
         for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
-            results = evaluate_model_rates(model, data, n_samples=P.n_samples, dropout_rates=list(dropout_rates),
-                                           level=P.interval_level, device=device, seed=seed,
+            results = evaluate_model_rates(model, data, n_samples=P.uncertainty.n_samples, dropout_rates=list(dropout_rates),
+                                           level=P.uncertainty.interval_level, device=device, seed=seed,
                                            cache=predictions_dir(P.profile))
             for p, m in zip(dropout_rates, results):
                 rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
@@ -139,7 +139,7 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
         if data.mask is not None:
             mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
         for (kind, seed), model in models.items():
-            pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.n_samples,
+            pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
                                         dropout_rates=[None], seed=seed, device=device)[0]
             expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
             rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,

@@ -230,7 +230,7 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     Test: the ``test`` split at ``evaluation_level``. Validation: the ``val`` split (other
     sequences, other motions / scenes) at ``val_noise``, by default the test's noise level: the
     gate is tuned, on held-out sequences, for the condition it will run in. Times are measured on
-    about ``P.gating_timing_frames`` frames of evenly spaced test sequences (0: all), metrics on
+    about ``P.gating.timing_frames`` frames of evenly spaced test sequences (0: all), metrics on
     all of them. Returns
     {'table': one row per seed and setting, 'sweep': one row per seed, method and threshold,
     'validation': the candidate table per seed}.
@@ -249,12 +249,12 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     tables, sweeps, vals = [], [], []
     for seed, model in steps(sorted(drf.items()), f"{study}: gating per DRF seed"):
         model = model.to(device)
-        gate, val_table = fit_gate(model, val, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
-                                   n_points=P.gating_sweep_points, level=P.interval_level, seed=seed,
+        gate, val_table = fit_gate(model, val, n_samples=P.uncertainty.n_samples, tolerance=P.gating.picp_tolerance,
+                                   n_points=P.gating.sweep_points, level=P.uncertainty.interval_level, seed=seed,
                                    device=device)
-        table, sweep = sweep_gate(model, gate, test, n_samples=P.n_samples, level=P.interval_level, seed=seed,
+        table, sweep = sweep_gate(model, gate, test, n_samples=P.uncertainty.n_samples, level=P.uncertainty.interval_level, seed=seed,
                                   device=device, min_run_time=min_run_time,
-                                  timing_frames=P.gating_timing_frames)
+                                  timing_frames=P.gating.timing_frames)
         ident = {"study": study, "seed": seed, "noise": level_, "val_noise": val_level}
         gate_info = {"direction": gate.direction, "rank_correlation": gate.rank_correlation,
                      "val_fraction": gate.val_fraction, "val_picp": gate.val_picp,
@@ -278,15 +278,15 @@ def train_noise_gates(P, study: str, models: dict) -> pd.DataFrame:
     from drfkit.study import studies
 
     registry.study(study)  # a clear error for an unknown study
-    train_noise = {"pendulum": P.pend_train_max_noise, "pedestrians": P.ped_train_p}[study]
+    train_noise = {"pendulum": P.pendulum.train_max_noise, "pedestrians": P.pedestrians.train_p}[study]
     val = studies.study_data(P, study, "val", train_noise)
     test = studies.study_data(P, study, "test", evaluation_level(P, study))
     rows = []
     for (kind, seed), model in sorted(models.items()):
         if kind != "drf":
             continue
-        gate, _ = fit_gate(model, val, n_samples=P.n_samples, tolerance=P.gating_picp_tolerance,
-                           n_points=P.gating_sweep_points, level=P.interval_level, seed=seed)
+        gate, _ = fit_gate(model, val, n_samples=P.uncertainty.n_samples, tolerance=P.gating.picp_tolerance,
+                           n_points=P.gating.sweep_points, level=P.uncertainty.interval_level, seed=seed)
         rows.append({"study": study, "seed": seed, "val_noise": train_noise, "direction": gate.direction,
                      "rank_correlation": gate.rank_correlation, "val_fraction": gate.val_fraction,
                      "val_picp": gate.val_picp, "val_picp_always": gate.val_picp_always,

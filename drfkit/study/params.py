@@ -1,4 +1,4 @@
-"""Notebook parameters: one schema, validated in each notebook's first cell.
+"""Notebook parameters: validated in each notebook's first cell, handed over as the typed profile.
 
 papermill only *warns* about a parameter the notebook does not declare, and happily
 injects a string where an int was meant. So every notebook calls
@@ -6,216 +6,28 @@ injects a string where an int was meant. So every notebook calls
 key, a wrong type or an out-of-range value stops the notebook there, with a message
 that names the key, the notebook and the allowed values.
 
-The YAML profiles in ``params/`` are nested by section (``pendulum:``, ``pendulum.book:``,
-``pedestrians:``, ``monoloco:``, ...; ``SCHEMA`` below is their layout, with a Python type, the
-allowed values and a check for every key). Notebooks see one flat name per parameter, because
-papermill injects top-level variables: a section's prefix plus the key (``pendulum.book.epochs``
-is ``pend_book_epochs``), shared by every notebook that declares it (data parameters are read by
-several notebooks, and must agree so that cached artefacts are found).
+The YAML profiles in ``params/`` are nested by section (``drfkit.study.schema.SCHEMA``: a Python
+type, the allowed values and a check for every key). Notebooks see one flat name per parameter,
+because papermill injects top-level variables: a section's prefix plus the key
+(``pendulum.book.epochs`` is ``pend_book_epochs``), shared by every notebook that declares it (data
+parameters are read by several notebooks, and must agree so that cached artefacts are found). That
+flat form lives only at the papermill boundary: ``validate`` returns the typed, nested profile
+(``drfkit.study.profile.Profile``, ``P.pendulum.book.epochs``) that the study and book layers read.
 """
 from __future__ import annotations
 
 import difflib
 import math
 import types
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, get_args, get_origin
+from typing import Any, get_args, get_origin
 
 import yaml
 
-from drfkit.util.paths import PARAMS_DIR
-from drfkit.methods.protocols import ABLATION_BUDGETS, PEDESTRIAN_PROTOCOLS, PROTOCOLS, VARIANTS
+from drfkit.study.profile import Profile, build_profile
 from drfkit.study.registry import STUDIES
-
-
-class ParameterError(ValueError):
-    """A parameter is unknown, of the wrong type or out of range."""
-
-
-@dataclass(frozen=True)
-class Spec:
-    """One parameter: its Python type, the allowed values in words and as a check."""
-    type: Any  # int, float, str, bool, dict, list[int], list[float] or list[str]
-    allowed: str  # human-readable description of the allowed values
-    check: Callable[[Any], bool] = lambda v: True
-    doc: str = ""
-    name: str = ""  # the notebook's name for it when it is not the section's prefix + key
-
-    @property
-    def kind(self) -> str:
-        """``int``, ``list[float]``, ...: how messages name the type."""
-        return self.type.__name__ if isinstance(self.type, type) and get_origin(self.type) is None else str(self.type)
-
-
-@dataclass(frozen=True)
-class Section:
-    """A YAML section: its keys' notebook names are ``prefix`` + key (prefixes of nested sections add up)."""
-    prefix: str
-    keys: dict[str, "Spec | Section"]
-    doc: str = ""
-
-
-def _in01(v: float) -> bool:
-    return 0.0 <= v <= 1.0
-
-
-def _levels(v: list[float]) -> bool:
-    return len(v) > 0 and all(map(_in01, v))
-
-
-def _seeds(v: list[int]) -> bool:
-    return len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0
-
-
-def _subset(options) -> Callable[[list[str]], bool]:
-    return lambda v: len(v) > 0 and set(v) <= set(options)
-
-
-PEND_MODELS = STUDIES["pendulum"].kinds
-PED_MODELS = STUDIES["pedestrians"].kinds
-STUDY_NAMES = tuple(STUDIES)
-
-
-def _kinds_of(study: str) -> Callable[[list[str]], bool]:
-    """The check of a study's ``models``: its registry entry's kinds when the check runs (a kind
-    registered later, e.g. by a test, is accepted)."""
-    return lambda v: _subset(STUDIES[study].kinds)(v)
-_POSITIVE = ("an integer >= 1", lambda v: v >= 1)
-_RATE = ("a number in (0, 1)", lambda v: 0 < v < 1)
-_LEVELS = "a non-empty list of numbers in [0, 1]"
-_SEEDS = "a non-empty list of distinct integers >= 0"
-
-# The profile's layout: what params/*.yaml hold, section by section. Notebooks (papermill injects
-# top-level names) see the flat names: pendulum.book.epochs is pend_book_epochs.
-SCHEMA = Section("", {
-    "profile": Spec(str, "a folder name of letters, digits, '_' or '-'",
-                    lambda v: v.replace("_", "").replace("-", "").isalnum(), "results land in results/<profile>/"),
-    "seeds": Spec(list[int], _SEEDS, _seeds, "one training run per seed; spread over seeds gives the error bars"),
-    "device": Spec(str, "'auto', 'cpu' or 'cuda'", lambda v: v in ("auto", "cpu", "cuda")),
-    "threads": Spec(int, "an integer >= 0 (0 keeps torch's default)", lambda v: v >= 0),
-    "pendulum": Section("pend_", {
-        "train_sequences": Spec(int, *_POSITIVE),
-        "val_sequences": Spec(int, *_POSITIVE),
-        "test_sequences": Spec(int, *_POSITIVE),
-        "seq_len": Spec(int, "an integer >= 6 (the first 5 frames are clean)", lambda v: v >= 6),
-        "train_max_noise": Spec(float, "a number in [0, 1]", _in01),
-        "eval_max_noise": Spec(list[float], _LEVELS, _levels),
-        "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
-        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
-        "models": Spec(list[str], f"a non-empty subset of {list(PEND_MODELS)}", _kinds_of("pendulum")),
-        "epochs": Spec(int, *_POSITIVE),
-        "batch_size": Spec(int, *_POSITIVE),
-        "lr": Spec(float, *_RATE),
-        "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
-                         "stop a run after this many epochs without a better validation NLL"),
-        "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
-                          lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebook 01 trains and evaluates (drfkit.methods.protocols)"),
-        "book": Section("book_", {
-            "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
-            "batch_size": Spec(int, *_POSITIVE),
-            "lr": Spec(float, *_RATE),
-            "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
-                             "stop a book-protocol run after this many epochs without a better validation NLL"),
-        }, "the book's training protocol (drfkit.methods.protocols)"),
-    }, "the noisy pendulum: data, then training under the paper's protocol"),
-    "dynamics": Section("", {
-        "bound_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
-                                "particles of the true-physics bound (drfkit.methods.oracle)"),
-        "ablation": Section("ablation_", {
-            "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
-            "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
-            "seeds": Spec(list[int], _SEEDS, _seeds),
-            "round2": Section("round2_", {
-                "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS,
-                               "budget of the second round: how the models are fit (drfkit.methods.protocols.ROUND2_VARIANTS)"),
-                "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
-                "seeds": Spec(list[int], _SEEDS, _seeds),
-            }),
-        }),
-        "regime": Section("regime_", {
-            "train_noise": Spec(list[float], "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
-                                lambda v: 0.5 in v and all(map(_in01, v)) and len(set(v)) == len(v),
-                                "max noise levels the noise-regime map trains at (drfkit.study.regime; 0.5 is the "
-                                "book's own protocol, others are drfkit.methods.protocols.regime_variant)"),
-            "seeds": Spec(list[int], _SEEDS, _seeds),
-            "test_sequences": Spec(int, *_POSITIVE, "sequences of the regime map's own test split (every level)"),
-        }),
-    }, "notebook 01's dynamics study"),
-    "pedestrians": Section("ped_", {
-        "source": Spec(str, "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
-        "nuscenes_root": Spec(str, "'' (none) or a folder holding <nuscenes_version>/sample.json ...",
-                              name="nuscenes_root"),
-        "nuscenes_version": Spec(str, "e.g. 'v1.0-mini' or 'v1.0-trainval'", lambda v: len(v) > 0,
-                                 name="nuscenes_version"),
-        "pifpaf_predictions": Spec(str, "'' (none) or a folder with one sub-folder of PifPaf JSON per noise level",
-                                   name="pifpaf_predictions"),
-        "n_scenes": Spec(int, "an integer >= 3 (train/val/test split by scene)", lambda v: v >= 3),
-        "frames_per_scene": Spec(int, "an integer >= 2", lambda v: v >= 2),
-        "train_p": Spec(float, "a number in [0, 1]", _in01),
-        "eval_p": Spec(list[float], _LEVELS, _levels),
-        "sweep_p": Spec(list[float], _LEVELS, _levels),
-        "seq_len": Spec(int, *_POSITIVE),
-        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
-        "sim_detector": Spec(dict, "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)",
-                             name="sim_detector"),
-        "models": Spec(list[str], f"a non-empty subset of {list(PED_MODELS)}", _kinds_of("pedestrians")),
-        "epochs": Spec(int, *_POSITIVE),
-        "batch_size": Spec(int, *_POSITIVE),
-        "lr": Spec(float, *_RATE),
-        "protocols": Spec(list[str], f"a non-empty subset of {list(PEDESTRIAN_PROTOCOLS)} that holds 'paper', "
-                                     "without repeats",
-                          lambda v: "paper" in v and set(v) <= set(PEDESTRIAN_PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebook 02 trains and notebooks 03 and 05 judge "
-                          "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)"),
-    }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
-    "monoloco": Section("monoloco_", {
-        "epochs": Spec(int, *_POSITIVE),
-        "batch_size": Spec(int, *_POSITIVE),
-        "lr": Spec(float, *_RATE),
-    }, "Monoloco's own schedule"),
-    "evaluation": Section("eval_", {
-        "studies": Spec(list[str], f"a non-empty subset of {list(STUDY_NAMES)}, without repeats",
-                        lambda v: len(v) > 0 and set(v) <= set(STUDY_NAMES) and len(set(v)) == len(v),
-                        "which studies notebooks 03 and 05 evaluate (both, unless one's models are not trained "
-                        "yet: its claims are then listed as not evaluated)"),
-    }),
-    "uncertainty": Section("", {
-        "n_samples": Spec(int, "an integer >= 1 (Monte Carlo dropout passes)", lambda v: v >= 1),
-        "dropout_rates": Spec(list[float], "a non-empty list of numbers in [0, 1)",
-                              lambda v: len(v) > 0 and all(0 <= x < 1 for x in v)),
-        "interval_level": Spec(float, "a number in (0, 1), e.g. 0.95", lambda v: 0 < v < 1),
-    }),
-    "timing": Section("timing_", {
-        "batch_sizes": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
-        "threads": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
-        "min_run_time": Spec(float, "seconds > 0 per measurement", lambda v: v > 0),
-    }),
-    "gating": Section("gating_", {
-        "picp_tolerance": Spec(float, "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),
-        "sweep_points": Spec(int, "an integer >= 2", lambda v: v >= 2),
-        "timing_frames": Spec(int, "an integer >= 0 (0 = every test frame)", lambda v: v >= 0,
-                              "about this many real frames, of evenly spaced test sequences, are what the gating "
-                              "times are measured on; metrics use every test sequence"),
-    }),
-})
-
-
-def _flatten_schema(section: Section, prefix: str = "", path: tuple[str, ...] = ()):
-    for key, item in section.keys.items():
-        if isinstance(item, Section):
-            yield from _flatten_schema(item, prefix + item.prefix, path + (key,))
-        else:
-            yield (item.name or prefix + key), path + (key,), item
-
-
-# the flat (notebook) name of every parameter -> its spec, and -> its path in the YAML profile
-SPECS: dict[str, Spec] = {name: spec for name, _, spec in _flatten_schema(SCHEMA)}
-PATHS: dict[str, tuple[str, ...]] = {name: path for name, path, _ in _flatten_schema(SCHEMA)}
-_BY_PATH = {".".join(path): name for name, path in PATHS.items()}
-assert len(SPECS) == len(_BY_PATH), "two parameters share a notebook name"
-
+from drfkit.study.schema import _BY_PATH, PATHS, SCHEMA, SPECS, ParameterError, Section, Spec
+from drfkit.util.paths import PARAMS_DIR
 
 _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
@@ -248,7 +60,7 @@ NOTEBOOKS: dict[str, list[str]] = {
 # what a command line reads when it needs less than a notebook's whole set: the inference benchmark
 # (``python -m drfkit bench``) reads notebook 04's timing keys, not the pendulum's that its training-speed
 # part needs
-COMMANDS: dict[str, list[str]] = {"bench": _COMMON + ["n_samples"] + _TIMING}
+COMMANDS: dict[str, list[str]] = {"bench": _COMMON + ["n_samples"] + _TIMING, "simstats": _COMMON + _PED_DATA}
 
 
 def _key_set(name: str) -> list[str]:
@@ -260,13 +72,6 @@ def _key_set(name: str) -> list[str]:
     raise ParameterError(f"unknown notebook {name!r}; known: {sorted(NOTEBOOKS)} (and commands {sorted(COMMANDS)})")
 
 
-class Params(types.SimpleNamespace):
-    """Validated parameters of one notebook; attribute access, plus ``as_dict()``."""
-
-    def as_dict(self) -> dict[str, Any]:
-        return dict(vars(self))
-
-
 def _named(key: str) -> str:
     """'pend_book_epochs' [pendulum.book.epochs]: a notebook name with where it sits in a profile."""
     return f"'{key}' [{'.'.join(PATHS[key])}]" if key in PATHS else f"'{key}'"
@@ -276,7 +81,7 @@ def _coerce(key: str, typ: Any, value: Any, where: str) -> Any:
     def fail(expected: str) -> ParameterError:
         return ParameterError(
             f"{where}: parameter {_named(key)} must be {expected}, got {value!r} ({type(value).__name__}); "
-            f"allowed: {SPECS[key].allowed}"
+            f"allowed: {allowed_text(key)}"
         )
 
     if typ is int:
@@ -307,8 +112,21 @@ def _coerce(key: str, typ: Any, value: Any, where: str) -> Any:
     raise AssertionError(f"unknown type {typ}")
 
 
-def validate(notebook: str, values: dict[str, Any]) -> Params:
-    """Check ``values`` against the schema of ``notebook``; return them as ``Params``.
+def _registry_options(spec: Spec) -> list[str] | None:
+    """The names a registry-bounded list may hold (``Spec.registry``), None for any other parameter."""
+    if not spec.registry:
+        return None
+    return list(STUDIES) if spec.registry == "*" else list(STUDIES[spec.registry].kinds)
+
+
+def allowed_text(key: str) -> str:
+    """What ``key`` may hold, in words (a registry-bounded list names the registry's names now)."""
+    options = _registry_options(SPECS[key])
+    return SPECS[key].allowed if options is None else SPECS[key].allowed.format(options=options)
+
+
+def validate(notebook: str, values: dict[str, Any]) -> Profile:
+    """Check ``values`` (flat notebook names) against the schema of ``notebook``; return the typed profile.
 
     Every key of ``notebook`` must be present (the parameters cell defines them all);
     any other key is an error.
@@ -327,10 +145,10 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
     for key in allowed_keys:
         spec = SPECS[key]
         value = _coerce(key, spec.type, values[key], where)
-        if not spec.check(value):
-            raise ParameterError(
-                f"{where}: parameter {_named(key)} = {value!r} is out of range; allowed: {spec.allowed}"
-            )
+        options = _registry_options(spec)  # the registry's names when the check runs (a kind a test registered counts)
+        if not spec.check(value) or (options is not None and not set(value) <= set(options)):
+            raise ParameterError(f"{where}: parameter {_named(key)} = {value!r} is out of range; "
+                                 f"allowed: {allowed_text(key)}")
         out[key] = value
     if out.get("ped_source") == "nuscenes":
         for key, holds in (("nuscenes_root", f"{out.get('nuscenes_version', '<version>')}/sample.json and the other "
@@ -348,7 +166,7 @@ def validate(notebook: str, values: dict[str, Any]) -> Params:
             DetectorConfig.from_dict(out["sim_detector"])
         except (ValueError, TypeError) as exc:
             raise ParameterError(f"{where}: parameter 'sim_detector': {exc}") from exc
-    return Params(**out)
+    return build_profile(out, where)
 
 
 _IPYTHON_NAMES = {"In", "Out", "get_ipython", "exit", "quit", "open"}
@@ -473,13 +291,13 @@ def notebook_params(notebook: str, profile_values: dict[str, Any]) -> dict[str, 
     return subset
 
 
-def for_notebook(notebook: str, values: dict[str, Any]) -> Params:
+def for_notebook(notebook: str, values: dict[str, Any]) -> Profile:
     """The validated parameters of ``notebook`` from a whole profile's values (``load_profile``,
     overrides merged): what the command-line tools use to run as that notebook would."""
     return validate(notebook, notebook_params(notebook, values))
 
 
-def for_command(notebook: str, profile: str) -> Params | None:
+def for_command(notebook: str, profile: str) -> Profile | None:
     """``for_notebook`` of a named profile for a command line: None after printing the
     parameter error (the command then exits with status 2)."""
     try:

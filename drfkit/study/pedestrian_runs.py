@@ -35,8 +35,11 @@ from drfkit.util.paths import data_dir
 
 # Bump when the simulation or detector changes behaviour, so cached files are rebuilt.
 SIMULATOR_VERSION = 1
-DATA_KEYS = ("ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
-             "ped_frames_per_scene", "ped_train_p", "ped_seq_len", "ped_data_seed", "sim_detector")
+# the profile's pedestrians fields that name the data in checkpoint hashes, by the flat names the hashes
+# always had -> the field of P.pedestrians
+DATA_FIELDS = {name: name.removeprefix("ped_") for name in (
+    "ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
+    "ped_frames_per_scene", "ped_train_p", "ped_seq_len", "ped_data_seed", "sim_detector")}
 
 
 def load_simulated_pedestrians(
@@ -116,17 +119,17 @@ def pedestrian_records(P, noise: Noise | float | None = None) -> dict[str, Any]:
     """Per-detection records under ``noise`` (a ``Noise`` or its salt-and-pepper p; default the training
     noise), all splits."""
     return load_pedestrians(
-        data_dir(P.profile), P.ped_source, PEDESTRIANS.noise(noise, P), n_scenes=P.ped_n_scenes,
-        frames_per_scene=P.ped_frames_per_scene, seed=P.ped_data_seed,
-        detector=DetectorConfig.from_dict(P.sim_detector),
-        nuscenes_root=P.nuscenes_root or None, predictions_root=P.pifpaf_predictions or None,
-        nuscenes_version=P.nuscenes_version)
+        data_dir(P.profile), P.pedestrians.source, PEDESTRIANS.noise(noise, P), n_scenes=P.pedestrians.n_scenes,
+        frames_per_scene=P.pedestrians.frames_per_scene, seed=P.pedestrians.data_seed,
+        detector=DetectorConfig.from_dict(P.pedestrians.sim_detector),
+        nuscenes_root=P.pedestrians.nuscenes_root or None, predictions_root=P.pedestrians.pifpaf_predictions or None,
+        nuscenes_version=P.pedestrians.nuscenes_version)
 
 
 def pedestrian_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
     """Sequences of one split (split by scene, the same scenes at every noise level)."""
-    splits = split_by_scene(pedestrian_records(P, noise), seed=P.ped_data_seed)
-    return make_sequences(splits[split], P.ped_seq_len)
+    splits = split_by_scene(pedestrian_records(P, noise), seed=P.pedestrians.data_seed)
+    return make_sequences(splits[split], P.pedestrians.seq_len)
 
 
 def pedestrian_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
@@ -141,7 +144,7 @@ def pedestrian_data_key(P, protocol: str = "paper", noise_kind: str = "salt_and_
     PEDESTRIANS.check_protocol(protocol)
     # records under another kind of noise are other data; the paper's kind keeps the names it had
     other_kind = {"noise_kind": noise_kind} if noise_kind != "salt_and_pepper" else {}
-    return {k: getattr(P, k) for k in DATA_KEYS} | other_kind
+    return {name: getattr(P.pedestrians, field) for name, field in DATA_FIELDS.items()} | other_kind
 
 
 _TARGET_STATISTICS: dict[str, dict[str, float]] = {}  # per pedestrian data key: read the split once
@@ -173,16 +176,16 @@ def pedestrian_train_config(P, kind: str, seed: int, protocol: str = "paper") ->
     ours), with the protocol's recipe (``PEDESTRIAN_PROTOCOLS``)."""
     PEDESTRIANS.check_protocol(protocol)
     if kind == "monoloco":
-        return TrainConfig(epochs=P.monoloco_epochs, lr=P.monoloco_lr, batch_size=P.monoloco_batch_size,
+        return TrainConfig(epochs=P.monoloco.epochs, lr=P.monoloco.lr, batch_size=P.monoloco.batch_size,
                            seed=seed, lr_step=20, lr_gamma=0.9, framewise=True, grad_clip=None, select_on="l1")
-    return TrainConfig(epochs=P.ped_epochs, lr=P.ped_lr, batch_size=P.ped_batch_size, seed=seed,
+    return TrainConfig(epochs=P.pedestrians.epochs, lr=P.pedestrians.lr, batch_size=P.pedestrians.batch_size, seed=seed,
                        **PEDESTRIAN_PROTOCOLS[protocol])
 
 
 PEDESTRIANS = Study(
-    "pedestrians", "keypoints", 1, ("drf", "no_dynamics", "lstm", "monoloco"), models_key="ped_models",
-    train_level_key="ped_train_p", eval_levels_key="ped_eval_p", sweep_key="ped_sweep_p",
-    training_notebook="02_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="ped_protocols",
+    "pedestrians", "keypoints", 1, ("drf", "no_dynamics", "lstm", "monoloco"), section="pedestrians",
+    models_key="models", train_level_key="train_p", eval_levels_key="eval_p", sweep_key="sweep_p",
+    training_notebook="02_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="protocols",
     all_protocols=tuple(PEDESTRIAN_PROTOCOLS), data=pedestrian_data, data_key=pedestrian_data_key,
     model_options=pedestrian_model_options, train_config=pedestrian_train_config,
     noise_name="salt-and-pepper p", target_name="depth", target_unit="(m)")

@@ -30,9 +30,9 @@ def _noise(P, noise: Noise | float | None) -> Noise:
 
 def pendulum_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
     """Arrays of a pendulum split; ``noise`` a ``Noise`` or its max noise level (default: the training noise)."""
-    n = {"train": P.pend_train_sequences, "val": P.pend_val_sequences, "test": P.pend_test_sequences}[split]
-    return load_pendulum(data_dir(P.profile), split, n, P.pend_seq_len, _noise(P, noise),
-                         P.pend_data_seed + SPLIT_SEED_OFFSET[split])
+    n = {"train": P.pendulum.train_sequences, "val": P.pendulum.val_sequences, "test": P.pendulum.test_sequences}[split]
+    return load_pendulum(data_dir(P.profile), split, n, P.pendulum.seq_len, _noise(P, noise),
+                         P.pendulum.data_seed + SPLIT_SEED_OFFSET[split])
 
 
 def pendulum_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
@@ -42,7 +42,7 @@ def pendulum_data(P, split: str, noise: Noise | float | None = None, protocol: s
     blackouts = protocol_spec(protocol, "drf")["blackouts"]
     if split == "train" and blackouts:
         arrays = with_random_blackouts(arrays, blackouts["fraction"], tuple(blackouts["lengths"]),
-                                       seed=P.pend_data_seed + TRAINING_BLACKOUT_SEED_OFFSET)
+                                       seed=P.pendulum.data_seed + TRAINING_BLACKOUT_SEED_OFFSET)
     return _as_data(arrays)
 
 
@@ -51,8 +51,10 @@ def _as_data(arrays: dict[str, Any]) -> SequenceData:
 
 
 def pendulum_data_key(P, protocol: str = "paper", noise_kind: str = "rkn_uniform") -> dict[str, Any]:
-    key = {k: getattr(P, k) for k in ("pend_train_sequences", "pend_val_sequences", "pend_seq_len",
-                                        "pend_train_max_noise", "pend_data_seed")}
+    # named by the parameters' flat names, as checkpoint hashes always were
+    S = P.pendulum
+    key = {"pend_train_sequences": S.train_sequences, "pend_val_sequences": S.val_sequences,
+           "pend_seq_len": S.seq_len, "pend_train_max_noise": S.train_max_noise, "pend_data_seed": S.data_seed}
     # frames under another kind of noise are other data; the benchmark's kind keeps the names it had
     key |= {"noise_kind": noise_kind} if noise_kind != "rkn_uniform" else {}
     spec = protocol_spec(protocol, "drf")
@@ -88,10 +90,10 @@ def pendulum_train_config(P, kind: str, seed: int, protocol: str = "paper") -> T
     through the recursion, are ours). Any other protocol: its own profile section's schedule
     (``pend_<protocol>_*``) with the variant's recipe."""
     if protocol == "paper":
-        return TrainConfig(epochs=P.pend_epochs, lr=P.pend_lr, batch_size=P.pend_batch_size, seed=seed,
-                           patience=P.pend_patience)
+        return TrainConfig(epochs=P.pendulum.epochs, lr=P.pendulum.lr, batch_size=P.pendulum.batch_size, seed=seed,
+                           patience=P.pendulum.patience)
     recipe = recipe_fields(protocol_spec(protocol, kind))
-    schedule = {k: getattr(P, f"pend_{protocol}_{k}") for k in PROFILE_SCHEDULE}
+    schedule = {k: getattr(getattr(P.pendulum, protocol), k) for k in PROFILE_SCHEDULE}
     if recipe.get("mse_warmup") == "half":
         recipe["mse_warmup"] = schedule["epochs"] // 2
     return TrainConfig(seed=seed, **schedule, **recipe)
@@ -108,15 +110,16 @@ def pendulum_fresh_training(P, protocol: str, noise: Noise | float | None = None
     clean, level = pendulum_split(P, "train", noise), _noise(P, noise)
 
     def fresh(epoch: int) -> SequenceData:
-        return _as_data(redraw_noise(clean, level, fresh_noise_seed(P.pend_data_seed, epoch), spec["blackouts"]))
+        return _as_data(redraw_noise(clean, level, fresh_noise_seed(P.pendulum.data_seed, epoch), spec["blackouts"]))
 
     return fresh
 
 
 PENDULUM = Study(
-    "pendulum", "pendulum", 2, ("drf", "no_dynamics", "lstm"), models_key="pend_models",
-    train_level_key="pend_train_max_noise", eval_levels_key="pend_eval_max_noise", sweep_key="pend_sweep_max_noise",
-    training_notebook="01_pendulum_training", noise_kind="rkn_uniform", protocols_key="pend_protocols",
+    "pendulum", "pendulum", 2, ("drf", "no_dynamics", "lstm"), section="pendulum",
+    models_key="models", train_level_key="train_max_noise", eval_levels_key="eval_max_noise",
+    sweep_key="sweep_max_noise", training_notebook="01_pendulum_training", noise_kind="rkn_uniform",
+    protocols_key="protocols",
     all_protocols=tuple(PROTOCOLS), data=pendulum_data, data_key=pendulum_data_key,
     model_options=pendulum_model_options, train_config=pendulum_train_config,
     fresh_training=pendulum_fresh_training, noise_name="max noise", target_unit="(cos θ, sin θ)")

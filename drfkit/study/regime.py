@@ -161,6 +161,6 @@ def profile_map(P, progress: bool = False) -> pd.DataFrame:
     ``n_samples``, ``bound_particles``); rows under ``results/<profile>/ablation``."""
     from drfkit.util.paths import predictions_dir, results_dir
 
-    return regime_map(P.regime_train_noise, P.regime_seeds, P.ablation_round2_budget, results_dir(P.profile, "ablation"),
-                      P.pend_sweep_max_noise, P.regime_test_sequences, P.n_samples, P.bound_particles,
+    return regime_map(P.dynamics.regime.train_noise, P.dynamics.regime.seeds, P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"),
+                      P.pendulum.sweep_max_noise, P.dynamics.regime.test_sequences, P.uncertainty.n_samples, P.dynamics.bound_particles,
                       cache=predictions_dir(P.profile), progress=progress)

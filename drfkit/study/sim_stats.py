@@ -297,16 +297,16 @@ def simulator_table(truth: Mapping[str, np.ndarray], records: Mapping[float, Map
 def simulate_profile(P) -> tuple[dict[str, np.ndarray], dict[float, dict[str, np.ndarray]]]:
     """The truth and the records at every ``ped_eval_p`` of a profile's simulated source, as
     ``drfkit.study.studies.pedestrian_records`` builds them (same scenes, seed and detector), in memory
-    (nothing cached). ``P`` has ped_n_scenes, ped_frames_per_scene, ped_data_seed, sim_detector,
-    ped_eval_p (a notebook's ``Params`` or a namespace)."""
+    (nothing cached). ``P``: a typed profile that declares the pedestrians' data parameters
+    (``for_notebook("simstats", load_profile(...))``)."""
     from drfkit.data.noise import Noise
     from drfkit.data.sim_detector import DetectorConfig, simulate_records
     from drfkit.data.sim_world import simulate_truth
 
-    truth = simulate_truth(P.ped_n_scenes, P.ped_frames_per_scene, P.ped_data_seed)
-    detector = DetectorConfig.from_dict(P.sim_detector)
-    records = {float(p): simulate_records(truth, Noise("salt_and_pepper", float(p)), P.ped_data_seed, detector)
-               for p in P.ped_eval_p}
+    truth = simulate_truth(P.pedestrians.n_scenes, P.pedestrians.frames_per_scene, P.pedestrians.data_seed)
+    detector = DetectorConfig.from_dict(P.pedestrians.sim_detector)
+    records = {float(p): simulate_records(truth, Noise("salt_and_pepper", float(p)), P.pedestrians.data_seed, detector)
+               for p in P.pedestrians.eval_p}
     return truth, records
 
 
@@ -314,17 +314,16 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m drfkit simstats --profile paper``: the simulator's statistics at the
     profile's evaluation noise levels (markdown tables on stdout)."""
     import argparse
-    from types import SimpleNamespace
 
-    from drfkit.study.params import load_profile
+    from drfkit.study.params import for_notebook, load_profile
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--profile", default="paper")
     args = parser.parse_args(argv)
-    P = SimpleNamespace(**load_profile(args.profile))
+    P = for_notebook("simstats", load_profile(args.profile))
     truth, records = simulate_profile(P)
-    print(f"profile {args.profile}: {P.ped_n_scenes} scenes x {P.ped_frames_per_scene} keyframes, seed "
-          f"{P.ped_data_seed}; body span of the pinhole estimate {body_span_m(truth):.3f} m\n")
+    print(f"profile {args.profile}: {P.pedestrians.n_scenes} scenes x {P.pedestrians.frames_per_scene} keyframes, seed "
+          f"{P.pedestrians.data_seed}; body span of the pinhole estimate {body_span_m(truth):.3f} m\n")
     for p, rec in records.items():
         print(f"p = {p:g}: " + ", ".join(f"{k} {v}" for k, v in dataset_size(truth, rec).items()))
     print()

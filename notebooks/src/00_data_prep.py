@@ -43,7 +43,7 @@ from drfkit.report.writers import save_figure
 
 # %%
 splits = {split: studies.pendulum_split(P, split) for split in ("train", "val", "test")}
-tests = {m: studies.pendulum_split(P, "test", m) for m in P.pend_eval_max_noise}
+tests = {m: studies.pendulum_split(P, "test", m) for m in P.pendulum.eval_max_noise}
 for split, arrays in splits.items():
     print(f"{split:5s}: images {arrays['images'].shape} {arrays['images'].dtype}, "
           f"targets {arrays['targets'].shape} (cos θ, sin θ)")
@@ -58,7 +58,7 @@ err_deg = np.degrees(np.abs(np.angle(np.exp(1j * (theta_hat - theta)))))
 assert np.percentile(err_deg, 99) < 2.5, err_deg.max()
 # The same motions at every test noise level; the noise never exceeds max_noise.
 for m, arrays in tests.items():
-    assert np.array_equal(arrays["clean"], tests[P.pend_eval_max_noise[0]]["clean"])
+    assert np.array_equal(arrays["clean"], tests[P.pendulum.eval_max_noise[0]]["clean"])
     assert arrays["noise"].max() <= m + 1e-6 and np.all(arrays["noise"][:, :5] == 0)
 print("angle check passed: 99th percentile error below 2.5 degrees; test sets share their motions")
 
@@ -71,9 +71,9 @@ print(f"median angle error {np.median(err_deg):.2f} deg, 99th percentile {np.per
 # Frames 0–4 are always clean; later frames carry the correlated noise factor.
 
 # %%
-frames = np.linspace(0, P.pend_seq_len - 1, 8).astype(int)
+frames = np.linspace(0, P.pendulum.seq_len - 1, 8).astype(int)
 k = int(tests[max(tests)]["noise"].mean(axis=1).argmax())
-rows = [("clean", clean[k])] + [(f"max noise {m}", tests[m]["images"][k]) for m in P.pend_eval_max_noise]
+rows = [("clean", clean[k])] + [(f"max noise {m}", tests[m]["images"][k]) for m in P.pendulum.eval_max_noise]
 fig, axes = new_figure(len(frames), len(rows), width=1.1, height=1.2)
 for r, (name, seq) in enumerate(rows):
     for c, t in enumerate(frames):
@@ -107,16 +107,16 @@ plt.show()
 # %%
 from drfkit.data.drawing import draw_skeletons, render_frame
 
-records = {p: studies.pedestrian_records(P, p) for p in sorted({0.0, P.ped_train_p, *P.ped_eval_p})}
-base = records[P.ped_train_p]
-print(f"source: {P.ped_source}")
+records = {p: studies.pedestrian_records(P, p) for p in sorted({0.0, P.pedestrians.train_p, *P.pedestrians.eval_p})}
+base = records[P.pedestrians.train_p]
+print(f"source: {P.pedestrians.source}")
 print(f"images: {len(np.unique(base['image_id']))}, pedestrian instances (tracks): "
       f"{len(np.unique(base['track_id']))}, detections: {len(base['depth'])}, scenes: {len(np.unique(base['scene_id']))}")
 split_seqs = {s: studies.pedestrian_split(P, s) for s in ("train", "val", "test")}
 scene_sets = [set(np.unique(v["scene_id"])) for v in split_seqs.values()]
 assert not (scene_sets[0] & scene_sets[1] or scene_sets[0] & scene_sets[2] or scene_sets[1] & scene_sets[2])
 for s, v in split_seqs.items():
-    print(f"{s:5s}: {v['inputs'].shape[0]} sequences of {P.ped_seq_len} frames, {int(v['mask'].sum())} real frames")
+    print(f"{s:5s}: {v['inputs'].shape[0]} sequences of {P.pedestrians.seq_len} frames, {int(v['mask'].sum())} real frames")
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -134,7 +134,7 @@ levels = sorted(records)[:4]
 fig, axes = new_figure(2, (len(levels) + 1) // 2, width=5.5, height=3.3)
 for ax, p in zip(axes.ravel(), levels):
     rec = records[p]
-    img = render_frame(rec, image_id, p, seed=P.ped_data_seed)
+    img = render_frame(rec, image_id, p, seed=P.pedestrians.data_seed)
     img = draw_skeletons(img, rec["keypoints"][rec["image_id"] == image_id])
     ax.imshow(img); ax.set_title(f"salt-and-pepper p = {p}", fontsize=9); ax.axis("off")
 for ax in axes.ravel()[len(levels):]:

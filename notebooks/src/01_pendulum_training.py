@@ -54,17 +54,17 @@ curves = pd.read_csv(studies.tables_dir(P.profile) / "pendulum_training_curves.c
 curves.groupby("model")[["train_loss", "val_loss", "seconds"]].last()
 
 # %%
-assert set(curves["model"]) == set(P.pend_models) and set(curves["seed"]) == set(P.seeds)
+assert set(curves["model"]) == set(P.pendulum.models) and set(curves["seed"]) == set(P.seeds)
 epochs = curves.groupby(["model", "seed"])["epoch"].max()
-assert all(n == P.pend_epochs or results[key].stopped_early for key, n in epochs.items()), epochs
+assert all(n == P.pendulum.epochs or results[key].stopped_early for key, n in epochs.items()), epochs
 assert np.isfinite(curves[["train_loss", "val_loss"]].to_numpy()).all()
-print(f"{len(results)} runs trained for {epochs.min()} to {epochs.max()} of {P.pend_epochs} epochs "
-      f"({sum(r.stopped_early for r in results.values())} stopped by patience {P.pend_patience}); "
+print(f"{len(results)} runs trained for {epochs.min()} to {epochs.max()} of {P.pendulum.epochs} epochs "
+      f"({sum(r.stopped_early for r in results.values())} stopped by patience {P.pendulum.patience}); "
       f"checkpoints in results/{P.profile}/models/")
 
 # %%
 # each run's kept epoch is starred; the y-range shows the selection region, not the first epochs
-fig = plot_training_curves(curves, P.pend_models)
+fig = plot_training_curves(curves, P.pendulum.models)
 save_figure(P.profile, "pendulum_training_curves", fig)
 plt.show()
 
@@ -79,7 +79,7 @@ plt.show()
 # NBVAL_IGNORE_OUTPUT
 from drfkit.methods.train import selection_audit
 
-audit = selection_audit(curves, P.pend_patience)
+audit = selection_audit(curves, P.pendulum.patience)
 save_table(P.profile, "pendulum_model_selection", audit)
 audit.round(3)
 
@@ -98,10 +98,10 @@ from drfkit.methods.train import load_checkpoint, load_latest
 
 val = studies.pendulum_data(P, "val")
 modes = []
-for kind in P.pend_models:
+for kind in P.pendulum.models:
     run = results[(kind, P.seeds[0])]
     pair = {"selected": load_checkpoint(run.best_path), "last": load_latest(studies.checkpoint_stem(P, "pendulum", kind, P.seeds[0]))}
-    modes.append(compare_prediction_modes(pair, val, n_samples=P.n_samples, level=P.interval_level,
+    modes.append(compare_prediction_modes(pair, val, n_samples=P.uncertainty.n_samples, level=P.uncertainty.interval_level,
                                           seed=P.seeds[0]).assign(model=kind))
 modes = pd.concat(modes, ignore_index=True)
 save_table(P.profile, "pendulum_prediction_modes", modes)
@@ -113,11 +113,11 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # seeds with a 95 % t-interval; the paper's values are the black ticks.
 
 # %%
-evals = evaluate_study(P, "pendulum", P.pend_eval_max_noise)
+evals = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise)
 summary = summarise(evals, ["model", "noise"])
 save_table(P.profile, "pendulum_eval", evals)
 save_table(P.profile, "pendulum_mae", summary)
-assert len(evals) == len(P.pend_models) * len(P.seeds) * len(P.pend_eval_max_noise)
+assert len(evals) == len(P.pendulum.models) * len(P.seeds) * len(P.pendulum.eval_max_noise)
 assert evals[["mae", "picp", "mpiw", "nll"]].notna().all().all() and (evals["mae"] > 0).all()
 
 # %%
@@ -131,7 +131,7 @@ for _, r in summary.iterrows():
     print(f"MAE {r['model']:<12s} at max noise {r['noise']:g}: {r['mae']:.3f}")
 
 # %%
-fig = plot_mae_bars(summary, P.pend_models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise")
+fig = plot_mae_bars(summary, P.pendulum.models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise")
 save_figure(P.profile, "pendulum_mae", fig)
 plt.show()
 
@@ -141,14 +141,14 @@ plt.show()
 # `n_samples` MC dropout passes through the decoder, at several dropout rates (the paper's curve).
 
 # %%
-curve = evaluate_study(P, "pendulum", P.pend_eval_max_noise, P.dropout_rates)
+curve = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, P.uncertainty.dropout_rates)
 curve_summary = summarise(curve, ["model", "noise", "dropout_p"])
 save_table(P.profile, "pendulum_picp_mpiw", curve_summary)
-assert set(curve["dropout_p"]) == set(P.dropout_rates)
+assert set(curve["dropout_p"]) == set(P.uncertainty.dropout_rates)
 
 # %%
-fig = plot_picp_mpiw(curve_summary, P.pend_models, PENDULUM_PICP_MPIW, level_name="max noise",
-                     nominal=P.interval_level)
+fig = plot_picp_mpiw(curve_summary, P.pendulum.models, PENDULUM_PICP_MPIW, level_name="max noise",
+                     nominal=P.uncertainty.interval_level)
 save_figure(P.profile, "pendulum_picp_mpiw", fig)
 plt.show()
 
@@ -171,7 +171,7 @@ plt.show()
 from drfkit.study import dynamics
 
 models = {key: load_checkpoint(res.best_path) for key, res in results.items()}
-level = max(P.pend_eval_max_noise)
+level = max(P.pendulum.eval_max_noise)
 mechanism = cached(P.profile, dynamics.mechanism_table, P, models, level, timing=False)
 save_table(P.profile, "pendulum_mechanism", mechanism)
 mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"]).round(3).T
@@ -199,9 +199,9 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # %%
 # NBVAL_IGNORE_OUTPUT
 no_dyn = {seed: m for (kind, seed), m in models.items() if kind == "no_dynamics"}
-bound, bound_curves = cached(P.profile, dynamics.physics_bound, P, no_dyn, P.pend_eval_max_noise,
-                             n_particles=P.bound_particles, timing=False)
-pixels = dynamics.pixel_reference(P, sorted({0.0, *P.pend_eval_max_noise, 1.0}))  # clean to the benchmark's max
+bound, bound_curves = cached(P.profile, dynamics.physics_bound, P, no_dyn, P.pendulum.eval_max_noise,
+                             n_particles=P.dynamics.bound_particles, timing=False)
+pixels = dynamics.pixel_reference(P, sorted({0.0, *P.pendulum.eval_max_noise, 1.0}))  # clean to the benchmark's max
 save_table(P.profile, "pendulum_physics_bound", bound)
 save_table(P.profile, "pendulum_pixel_reference", pixels)
 bound_mae = bound.groupby("noise", sort=False)[["mae_input", "mae"]].mean()
@@ -210,7 +210,7 @@ bound_mae.join(pixels.set_index("noise")["mae"].rename("pixels_per_frame"), how=
 # %%
 assert (bound["mae"] > 0).all() and bound["noise"].astype(str).eq("blackout").any()
 levels_bound = {float(k): v for k, v in bound_mae["mae"].items() if k != "blackout"}
-fig = plot_mae_bars(summary, P.pend_models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise",
+fig = plot_mae_bars(summary, P.pendulum.models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise",
                     bound=levels_bound)
 save_figure(P.profile, "pendulum_mae_with_bound", fig)
 plt.show()
@@ -226,10 +226,10 @@ plt.show()
 
 # %%
 paper_check = cached(P.profile, dynamics.encoder_accuracy_check,
-                     studies.pendulum_split(P, "val")["targets"][: min(P.pend_val_sequences, 100)],
+                     studies.pendulum_split(P, "val")["targets"][: min(P.pendulum.val_sequences, 100)],
                      {"paper no_dynamics @0.5": PENDULUM_MAE[0.5]["no_dynamics"],
                       "paper no_dynamics @0.75": PENDULUM_MAE[0.75]["no_dynamics"]},
-                     n_particles=max(P.bound_particles, 300), seed=P.seeds[0], timing=False)
+                     n_particles=max(P.dynamics.bound_particles, 300), seed=P.seeds[0], timing=False)
 paper_check = paper_check.assign(paper_drf=[PENDULUM_MAE[0.5]["drf"], PENDULUM_MAE[0.75]["drf"]])
 save_table(P.profile, "pendulum_paper_encoder_check", paper_check)
 assert paper_check["filtered_mae"].lt(paper_check["encoder_mae"]).all()  # filtering the truth's physics helps
@@ -262,7 +262,7 @@ curves_dark = pd.concat([dynamics.blackout_curves(P, models), bound_curves], ign
 save_table(P.profile, "pendulum_blackout_curves", curves_dark)
 dark_table = dynamics.blackout_table(curves_dark)
 save_table(P.profile, "pendulum_blackout", dark_table)
-fig = plot_blackout(curves_dark, blackout_frames(P.pend_seq_len), P.pend_models + ["physics_bound"])
+fig = plot_blackout(curves_dark, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
 save_figure(P.profile, "pendulum_blackout", fig)
 plt.show()
 
@@ -288,14 +288,14 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 from drfkit.study import ablation
 from drfkit.util.paths import results_dir
 
-rows = [ablation.run_variant(v, s, P.ablation_budget, results_dir(P.profile, "ablation"), progress=False)
-        for v in P.ablation_variants for s in P.ablation_seeds]
-table = ablation.ablation_table(P.ablation_budget, results_dir(P.profile, "ablation"))  # every finished row
+rows = [ablation.run_variant(v, s, P.dynamics.ablation.budget, results_dir(P.profile, "ablation"), progress=False)
+        for v in P.dynamics.ablation.variants for s in P.dynamics.ablation.seeds]
+table = ablation.ablation_table(P.dynamics.ablation.budget, results_dir(P.profile, "ablation"))  # every finished row
 save_table(P.profile, "pendulum_ablation", table)
 ablation.summarise_ablation(table)
 
 # %%
-required = {(v, s) for v in P.ablation_variants for s in P.ablation_seeds}
+required = {(v, s) for v in P.dynamics.ablation.variants for s in P.dynamics.ablation.seeds}
 assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"].gt(0).all()
 
 # %% [markdown]
@@ -330,15 +330,15 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-round2_rows = [ablation.run_variant(v, s, P.ablation_round2_budget, results_dir(P.profile, "ablation"), progress=False)
-               for v in P.ablation_round2_variants for s in P.ablation_round2_seeds]
-round2 = ablation.ablation_table(P.ablation_round2_budget, results_dir(P.profile, "ablation"))
+round2_rows = [ablation.run_variant(v, s, P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"), progress=False)
+               for v in P.dynamics.ablation.round2.variants for s in P.dynamics.ablation.round2.seeds]
+round2 = ablation.ablation_table(P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"))
 save_table(P.profile, "pendulum_ablation_round2", round2)
 round2_summary = ablation.summarise_ablation(round2)
 round2_summary
 
 # %%
-required = {(v, s) for v in P.ablation_round2_variants for s in P.ablation_round2_seeds}
+required = {(v, s) for v in P.dynamics.ablation.round2.variants for s in P.dynamics.ablation.round2.seeds}
 assert required <= set(zip(round2["variant"], round2["seed"])) and round2["mae_0.5"].gt(0).all()
 
 # %%
@@ -357,7 +357,7 @@ print(ablation.round2_reading(round2_summary))
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.ablation_round2_seeds)))
+ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.dynamics.ablation.round2.seeds)))
 
 # %% [markdown]
 # ## The noise-regime map: where does a learned filter help?
@@ -382,7 +382,7 @@ plt.show()
 regime_table.round(4)
 
 # %%
-assert set(regimes["train_noise"]) == set(P.regime_train_noise) and regimes["mae"].gt(0).all()
+assert set(regimes["train_noise"]) == set(P.dynamics.regime.train_noise) and regimes["mae"].gt(0).all()
 assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 
 # %% [markdown]
@@ -406,16 +406,16 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 pieces = {"paper": (evals, mechanism, dark_table)}
 dark_curves = {"paper": curves_dark[curves_dark["model"] != "physics_bound"]}
 bounds = {"paper": bound}
-for protocol in P.pend_protocols:
+for protocol in P.pendulum.protocols:
     if protocol != "paper":
         trained = studies.trained_models(P, "pendulum", progress=True, protocol=protocol)
         dark_curves[protocol] = dynamics.blackout_curves(P, trained)
-        pieces[protocol] = (evaluate_study(P, "pendulum", P.pend_eval_max_noise, models=trained),
+        pieces[protocol] = (evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, models=trained),
                             cached(P.profile, dynamics.mechanism_table, P, trained, level, timing=False),
                             dynamics.blackout_table(dark_curves[protocol]))
         bounds[protocol] = cached(P.profile, dynamics.physics_bound, P,
                                   {seed: m for (kind, seed), m in trained.items() if kind == "no_dynamics"},
-                                  P.pend_eval_max_noise, n_particles=P.bound_particles, timing=False)[0]
+                                  P.pendulum.eval_max_noise, n_particles=P.dynamics.bound_particles, timing=False)[0]
 protocols = pd.concat([dynamics.protocol_table(name, *parts) for name, parts in pieces.items()], ignore_index=True)
 save_table(P.profile, "pendulum_protocols", protocols)
 protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).drop(columns="seed").round(4)
@@ -441,7 +441,7 @@ pd.DataFrame({f"drf / bound at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" els
 # %%
 by_protocol = pd.concat([c.assign(protocol=name) for name, c in dark_curves.items()]
                         + [bound_curves.assign(protocol=None)], ignore_index=True)
-fig = plot_blackout(by_protocol, blackout_frames(P.pend_seq_len), P.pend_models + ["physics_bound"])
+fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
 save_figure(P.profile, "pendulum_blackout_protocols", fig)
 plt.show()
 

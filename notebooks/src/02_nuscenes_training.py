@@ -64,7 +64,7 @@ from drfkit.methods.train import load_checkpoint
 # NBVAL_IGNORE_OUTPUT
 from drfkit.study import sim_stats
 
-if P.ped_source == "simulated":
+if P.pedestrians.source == "simulated":
     sim_truth, sim_records = sim_stats.simulate_profile(P)
     for level, sim_rec in sim_records.items():
         ac = sim_stats.error_autocorrelation(sim_truth, sim_rec)
@@ -103,7 +103,7 @@ pd.concat([c.assign(protocol=pr) for pr, c in curves.items()]).groupby(["protoco
 
 # %%
 for pr, c in curves.items():
-    assert set(c["model"]) == set(P.ped_models) and set(c["seed"]) == set(P.seeds), pr
+    assert set(c["model"]) == set(P.pedestrians.models) and set(c["seed"]) == set(P.seeds), pr
     assert np.isfinite(c[["train_loss", "val_loss"]].to_numpy()).all(), pr
 print(f"{sum(map(len, results.values()))} runs of {len(PROTOCOLS)} protocol(s); checkpoints in results/{P.profile}/models/")
 
@@ -111,7 +111,7 @@ print(f"{sum(map(len, results.values()))} runs of {len(PROTOCOLS)} protocol(s); 
 # the paper's protocol: validation NLL of the DRF family, Monoloco's validation L1 (m); the book's: every
 # run selected on validation L1 (m); kept epochs starred
 for pr, c in curves.items():
-    fig = plot_training_curves(c, P.ped_models)
+    fig = plot_training_curves(c, P.pedestrians.models)
     fig.suptitle(f"{pr} protocol", fontsize=9)
     save_figure(P.profile, "pedestrians_training_curves" if pr == "paper" else f"pedestrians_{pr}_training_curves", fig)
     plt.show()
@@ -123,11 +123,11 @@ for pr, c in curves.items():
 
 # %%
 models = {pr: studies.trained_models(P, "pedestrians", protocol=pr) for pr in PROTOCOLS}
-evals = pd.concat([evaluate_study(P, "pedestrians", [P.ped_train_p], models=models[pr]).assign(protocol=pr)
+evals = pd.concat([evaluate_study(P, "pedestrians", [P.pedestrians.train_p], models=models[pr]).assign(protocol=pr)
                    for pr in PROTOCOLS], ignore_index=True)
 summary = summarise(evals, ["protocol", "model", "noise"])
 save_table(P.profile, "pedestrians_in_distribution", summary)
-assert len(evals) == len(PROTOCOLS) * len(P.ped_models) * len(P.seeds) and (evals["mae"] > 0).all()
+assert len(evals) == len(PROTOCOLS) * len(P.pedestrians.models) * len(P.seeds) and (evals["mae"] > 0).all()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -135,7 +135,7 @@ summary[["protocol", "model", "n_seeds", "mae", "mae_ci", "picp", "mpiw", "nll"]
 
 # %%
 for pr in PROTOCOLS:
-    fig = plot_mae_bars(summary[summary["protocol"] == pr], P.ped_models, PEDESTRIAN_MAE, ylabel="depth MAE (m)",
+    fig = plot_mae_bars(summary[summary["protocol"] == pr], P.pedestrians.models, PEDESTRIAN_MAE, ylabel="depth MAE (m)",
                         level_name="p", width=5)
     fig.axes[0].set_title(f"{pr} protocol", fontsize=9)
     save_figure(P.profile, "pedestrians_in_distribution_mae" if pr == "paper" else f"pedestrians_{pr}_in_distribution_mae",
@@ -167,8 +167,8 @@ for pr in PROTOCOLS:
 # NBVAL_IGNORE_OUTPUT
 diagnostic = studies.train_models(P, "pedestrians", kinds=["monoloco"], options={"inputs": "detected"})
 fed = {("monoloco_detected_inputs", seed): load_checkpoint(res.best_path) for (_, seed), res in diagnostic.items()}
-inputs_evals = pd.concat([evaluate_study(P, "pedestrians", [P.ped_train_p, *P.ped_eval_p], models=fed),
-                          evaluate_study(P, "pedestrians", [P.ped_train_p, *P.ped_eval_p],
+inputs_evals = pd.concat([evaluate_study(P, "pedestrians", [P.pedestrians.train_p, *P.pedestrians.eval_p], models=fed),
+                          evaluate_study(P, "pedestrians", [P.pedestrians.train_p, *P.pedestrians.eval_p],
                                          models={k: m for k, m in models["paper"].items()
                                                  if k[0] in ("monoloco", "no_dynamics")})], ignore_index=True)
 inputs_summary = summarise(inputs_evals, ["model", "noise"])
@@ -177,7 +177,7 @@ inputs_summary.pivot(index="model", columns="noise", values="mae").round(3)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-reading = claims.monoloco_inputs_reading(inputs_summary, P.ped_train_p)
+reading = claims.monoloco_inputs_reading(inputs_summary, P.pedestrians.train_p)
 assert reading["text"]
 print(reading["text"])
 

@@ -82,17 +82,17 @@ from drfkit.study.bench import (COLUMNS, MODES, STUDIES, add_ratios, inference_b
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-load_before, table, load_after = cached(P.profile, inference_benchmark_with_load, P.n_samples, P.timing_batch_sizes,
-                                        P.timing_threads, P.timing_min_run_time, P.device, seed=P.seeds[0],
+load_before, table, load_after = cached(P.profile, inference_benchmark_with_load, P.uncertainty.n_samples, P.timing.batch_sizes,
+                                        P.timing.threads, P.timing.min_run_time, P.device, seed=P.seeds[0],
                                         timing=True)
 save_table(P.profile, "timing", table)
 atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
-table[table["batch"] == min(P.timing_batch_sizes)].drop(columns=["n_samples", "load_1min"]).round(4)
+table[table["batch"] == min(P.timing.batch_sizes)].drop(columns=["n_samples", "load_1min"]).round(4)
 
 # %%
 devices = timing_devices(P.device)
 pairs = [(study, kind, mode) for study, (_, _, kinds) in STUDIES.items() for kind in kinds for mode in MODES[kind]]
-expected = {(*pair, b, t, d) for pair in pairs for b in P.timing_batch_sizes for t in P.timing_threads
+expected = {(*pair, b, t, d) for pair in pairs for b in P.timing.batch_sizes for t in P.timing.threads
             for d in devices}
 cells = list(zip(table["study"], table["model"], table["mode"], table["batch"], table["threads"], table["device"]))
 assert list(table.columns) == COLUMNS
@@ -103,8 +103,8 @@ recomputed = add_ratios(table)
 for col in ("ratio_to_monoloco_published", "ratio_to_no_sampling"):
     assert np.allclose(recomputed[col], table[col], equal_nan=True), f"{col} is not medians / same-group base"
 assert table.loc[table["study"] == "pendulum", "ratio_to_monoloco_published"].isna().all()
-print(f"measured {len(pairs)} model/mode pairs x {len(P.timing_batch_sizes)} batch sizes x "
-      f"{len(P.timing_threads)} thread counts on each device; every ratio is within one "
+print(f"measured {len(pairs)} model/mode pairs x {len(P.timing.batch_sizes)} batch sizes x "
+      f"{len(P.timing.threads)} thread counts on each device; every ratio is within one "
       f"(batch, threads, device) group")
 
 # %% [markdown]
@@ -113,7 +113,7 @@ print(f"measured {len(pairs)} model/mode pairs x {len(P.timing_batch_sizes)} bat
 # predictions the paper compares; dotted: the deterministic pass of the same model.
 
 # %%
-claim_threads = min(P.timing_threads)
+claim_threads = min(P.timing.threads)
 styles = {"published": ("-", "s"), "batched": ("-", "o"), "sequential": ("--", "^"), "naive": ("-.", "v"),
           "no_sampling": (":", ".")}
 fig, axes = new_figure(2, width=5.2, height=3.8)
@@ -126,7 +126,7 @@ for ax, study in zip(axes[0], STUDIES):
                 label=f"{label(kind)} {mode}")
     ax.set_xscale("log"); ax.set_yscale("log")
     ax.set_xlabel("batch (frames per call)"); ax.set_ylabel("ms per frame (median)")
-    ax.set_title(f"{study}, CPU, {claim_threads} thread(s), S = {P.n_samples}")
+    ax.set_title(f"{study}, CPU, {claim_threads} thread(s), S = {P.uncertainty.n_samples}")
     ax.legend(fontsize=6)
 save_figure(P.profile, "timing_ms_per_frame", fig)
 plt.show()
@@ -141,8 +141,8 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-b1 = min(P.timing_batch_sizes)
-groups = [("cpu", t) for t in P.timing_threads] + [(d, claim_threads) for d in devices if d != "cpu"]
+b1 = min(P.timing.batch_sizes)
+groups = [("cpu", t) for t in P.timing.threads] + [(d, claim_threads) for d in devices if d != "cpu"]
 side = pd.DataFrame({"paper (GTX 1080), ms": [TIMING_MS["monoloco"], TIMING_MS["drf"], np.nan],
                      "paper speed-up": [1.0, TIMING_SPEEDUP, np.nan]},
                     index=["Monoloco (published, S sequential passes)", "DRF (S batched decoder samples)",
@@ -171,7 +171,7 @@ speedup = speedup_vs_monoloco(table, b1, claim_threads, "cpu")
 row = claims.c6_speedup(speedup)
 others = [f"{dev} {t} thr: {speedup_vs_monoloco(table, b1, t, dev):.2f}x" for dev, t in groups
           if (dev, t) != ("cpu", claim_threads)]
-row["ours"] += (f" (CPU, {claim_threads} thread(s), S = {P.n_samples}" + ("; " + ", ".join(others) if others else "")
+row["ours"] += (f" (CPU, {claim_threads} thread(s), S = {P.uncertainty.n_samples}" + ("; " + ", ".join(others) if others else "")
                 + f"; 1-min load up to {table['load_1min'].max():.1f} on {os.cpu_count()} cores)")
 _ = claims.upsert(P.profile, [row])
 print(f"C6: {row['ours']} -> {row['verdict']}")
@@ -182,7 +182,7 @@ def ms(model, mode, threads=claim_threads, batch=b1, device="cpu", column="media
 
 
 overhead = ms("drf", "batched") / ms("drf", "no_sampling")
-mono_step = ms("monoloco", "published") / P.n_samples
+mono_step = ms("monoloco", "published") / P.uncertainty.n_samples
 SPEEDUP_TARGET, OVERHEAD_TARGET = claims.TIMING_SPEEDUP_TARGET, claims.SAMPLING_OVERHEAD_TARGET  # why: drfkit.study.claims
 checks = [(f"DRF (S samples) >= {SPEEDUP_TARGET:g}x faster than Monoloco as published, batch 1",
            speedup >= SPEEDUP_TARGET, f"{speedup:.2f}x"),
@@ -202,17 +202,17 @@ det, bat = ms("drf", "no_sampling"), ms("drf", "batched")
 seq, naive = ms("drf", "sequential"), ms("drf", "naive")
 mono_det, mono_bat = ms("monoloco", "no_sampling"), ms("monoloco", "batched")
 print(f"At batch {b1} on CPU with {claim_threads} thread(s): one Monoloco dropout pass costs about "
-      f"{mono_step:.3f} ms ({P.n_samples} of them: {ms('monoloco', 'published'):.3f} ms), while DRF's "
+      f"{mono_step:.3f} ms ({P.uncertainty.n_samples} of them: {ms('monoloco', 'published'):.3f} ms), while DRF's "
       f"deterministic step costs {det:.3f} ms, i.e. {det / mono_det:.1f}x a deterministic Monoloco pass "
       f"({mono_det:.3f} ms): the Kalman step (Cholesky solve, Joseph-form update) and the transition LSTM "
       f"are many small operators. Sampling changes DRF's time by {bat - det:+.3f} ms ({overhead:.2f}x its "
       f"deterministic pass; differences below the IQR {ms('drf', 'batched', column='iqr_ms_per_frame'):.3f} ms "
       f"are noise), because only the decoder is sampled, in one call. The speed-up over "
-      f"Monoloco as published is therefore about {P.n_samples} x {mono_step:.3f} / {bat:.3f} = "
+      f"Monoloco as published is therefore about {P.uncertainty.n_samples} x {mono_step:.3f} / {bat:.3f} = "
       f"{speedup:.2f}x.")
-print(f"Where the gain comes from: sampling the decoder in one call instead of {P.n_samples} calls saves "
+print(f"Where the gain comes from: sampling the decoder in one call instead of {P.uncertainty.n_samples} calls saves "
       f"{seq - bat:.3f} ms ({seq / bat:.1f}x); running the filter once instead of in each of the "
-      f"{P.n_samples} passes saves {naive - seq:.3f} ms ({naive / seq:.1f}x). Monoloco batched "
+      f"{P.uncertainty.n_samples} passes saves {naive - seq:.3f} ms ({naive / seq:.1f}x). Monoloco batched "
       f"({mono_bat:.3f} ms) would be {ms('monoloco', 'published') / mono_bat:.1f}x faster than Monoloco as "
       f"published, and then {'still slower than' if mono_bat > bat else 'as fast as or faster than'} DRF "
       f"({mono_bat / bat:.2f}x DRF's time): "
@@ -221,13 +221,13 @@ print(f"Where the gain comes from: sampling the decoder in one call instead of {
          "where the dropout sits matters beyond batching: even batched, Monoloco samples every layer."))
 if speedup < SPEEDUP_TARGET:
     print(f"Target 1 missed: DRF's deterministic step alone ({det:.3f} ms) is "
-          f"{ms('monoloco', 'published') / det:.2f}x cheaper than Monoloco's {P.n_samples} passes, so no "
+          f"{ms('monoloco', 'published') / det:.2f}x cheaper than Monoloco's {P.uncertainty.n_samples} passes, so no "
           f"sampling scheme could reach {SPEEDUP_TARGET:g}x here.")
 if overhead > OVERHEAD_TARGET:
     print(f"Target 2 missed: sampling adds {bat - det:.3f} ms to a {det:.3f} ms step; at batch {b1} this is "
-          f"the fixed cost of the extra operators (mask draw, {P.n_samples}-fold readout, mixture moments), "
+          f"the fixed cost of the extra operators (mask draw, {P.uncertainty.n_samples}-fold readout, mixture moments), "
           f"not arithmetic.")
-high_t = max(P.timing_threads)
+high_t = max(P.timing.threads)
 if high_t != claim_threads:
     slow = ms("drf", "batched", high_t) / bat
     print(f"With {high_t} threads DRF's batch-{b1} prediction takes {slow:.2f}x its {claim_threads}-thread "
@@ -243,7 +243,7 @@ if "cuda" in devices:
     print(f"On CUDA at batch {b1}: DRF {ms('drf', 'batched', device='cuda'):.3f} ms vs Monoloco as published "
           f"{ms('monoloco', 'published', device='cuda'):.3f} ms per frame "
           f"({speedup_vs_monoloco(table, b1, claim_threads, 'cuda'):.2f}x).")
-big = max(P.timing_batch_sizes)
+big = max(P.timing.batch_sizes)
 print(f"At batch {big} (CPU, {claim_threads} thread(s)) the per-frame costs are DRF "
       f"{ms('drf', 'batched', batch=big):.4f} ms and Monoloco as published "
       f"{ms('monoloco', 'published', batch=big):.4f} ms ({speedup_vs_monoloco(table, big, claim_threads, 'cpu'):.2f}x): "
@@ -298,7 +298,7 @@ train, val = studies.pendulum_data(P, "train"), studies.pendulum_data(P, "val")
 batch = min(50, len(train))
 configs = {k: studies.model_config("pendulum", k) for k in ["no_dynamics", "lstm", "drf"]}
 speed = cached(P.profile, training_step_times, configs | {"drf_per_step": configs["drf"]}, train.inputs[:batch],
-               train.targets[:batch], n_batches_per_epoch=int(np.ceil(P.pend_train_sequences / batch)),
+               train.targets[:batch], n_batches_per_epoch=int(np.ceil(P.pendulum.train_sequences / batch)),
                min_run_time=0.5, min_rounds=15, model_attrs={"drf_per_step": {"whole_sequence": False}},
                with_flops=True, timing=True)
 save_table(P.profile, "pendulum_training_speed", speed)

@@ -1,0 +1,220 @@
+"""The profile's schema: every parameter's section, type, allowed values and check, in one place.
+
+The YAML profiles in ``params/`` are nested by section (``pendulum:``, ``pendulum.book:``,
+``pedestrians:``, ...). ``SCHEMA`` is that layout; ``drfkit.study.profile`` turns it into the typed
+profile the study and book layers read (``P.pendulum.book.epochs``), and ``drfkit.study.params``
+validates a profile against it. Notebooks see one flat name per parameter, because papermill
+injects top-level variables: a section's prefix plus the key (``pendulum.book.epochs`` is
+``pend_book_epochs``); ``SPECS`` and ``PATHS`` map those names to their specs and paths.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, get_origin
+
+from drfkit.methods.protocols import ABLATION_BUDGETS, PEDESTRIAN_PROTOCOLS, PROTOCOLS, VARIANTS
+
+
+class ParameterError(ValueError):
+    """A parameter is unknown, of the wrong type or out of range."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One parameter: its Python type, the allowed values in words and as a check."""
+    type: Any  # int, float, str, bool, dict, list[int], list[float] or list[str]
+    allowed: str  # human-readable description of the allowed values
+    check: Callable[[Any], bool] = lambda v: True
+    doc: str = ""
+    name: str = ""  # the notebook's name for it when it is not the section's prefix + key
+    # a list bounded by the registry (drfkit.study.registry), checked by drfkit.study.params when it validates,
+    # so that a kind registered later (by a test, say) is accepted: a study's name for its model kinds, '*' for
+    # the studies themselves; ``allowed`` then says where the names go ('{options}')
+    registry: str = ""
+
+    @property
+    def kind(self) -> str:
+        """``int``, ``list[float]``, ...: how messages name the type."""
+        return self.type.__name__ if isinstance(self.type, type) and get_origin(self.type) is None else str(self.type)
+
+
+@dataclass(frozen=True)
+class Section:
+    """A YAML section: its keys' notebook names are ``prefix`` + key (prefixes of nested sections add up)."""
+    prefix: str
+    keys: dict[str, "Spec | Section"]
+    doc: str = ""
+
+
+def _in01(v: float) -> bool:
+    return 0.0 <= v <= 1.0
+
+
+def _levels(v: list[float]) -> bool:
+    return len(v) > 0 and all(map(_in01, v))
+
+
+def _seeds(v: list[int]) -> bool:
+    return len(v) > 0 and len(set(v)) == len(v) and min(v) >= 0
+
+
+def _subset(options) -> Callable[[list[str]], bool]:
+    return lambda v: len(v) > 0 and set(v) <= set(options)
+
+
+def _nonempty(v: list) -> bool:
+    return len(v) > 0
+
+
+def _names(v: list[str]) -> bool:
+    return len(v) > 0 and len(set(v)) == len(v)
+
+
+_POSITIVE = ("an integer >= 1", lambda v: v >= 1)
+_RATE = ("a number in (0, 1)", lambda v: 0 < v < 1)
+_LEVELS = "a non-empty list of numbers in [0, 1]"
+_SEEDS = "a non-empty list of distinct integers >= 0"
+
+# The profile's layout: what params/*.yaml hold, section by section. Notebooks (papermill injects
+# top-level names) see the flat names: pendulum.book.epochs is pend_book_epochs.
+SCHEMA = Section("", {
+    "profile": Spec(str, "a folder name of letters, digits, '_' or '-'",
+                    lambda v: v.replace("_", "").replace("-", "").isalnum(), "results land in results/<profile>/"),
+    "seeds": Spec(list[int], _SEEDS, _seeds, "one training run per seed; spread over seeds gives the error bars"),
+    "device": Spec(str, "'auto', 'cpu' or 'cuda'", lambda v: v in ("auto", "cpu", "cuda")),
+    "threads": Spec(int, "an integer >= 0 (0 keeps torch's default)", lambda v: v >= 0),
+    "pendulum": Section("pend_", {
+        "train_sequences": Spec(int, *_POSITIVE),
+        "val_sequences": Spec(int, *_POSITIVE),
+        "test_sequences": Spec(int, *_POSITIVE),
+        "seq_len": Spec(int, "an integer >= 6 (the first 5 frames are clean)", lambda v: v >= 6),
+        "train_max_noise": Spec(float, "a number in [0, 1]", _in01),
+        "eval_max_noise": Spec(list[float], _LEVELS, _levels),
+        "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
+        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
+        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty,
+                       registry="pendulum"),
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+        "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                         "stop a run after this many epochs without a better validation NLL"),
+        "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
+                          lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
+                          "the training protocols notebook 01 trains and evaluates (drfkit.methods.protocols)"),
+        "book": Section("book_", {
+            "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
+            "batch_size": Spec(int, *_POSITIVE),
+            "lr": Spec(float, *_RATE),
+            "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
+                             "stop a book-protocol run after this many epochs without a better validation NLL"),
+        }, "the book's training protocol (drfkit.methods.protocols)"),
+    }, "the noisy pendulum: data, then training under the paper's protocol"),
+    "dynamics": Section("", {
+        "bound_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
+                                "particles of the true-physics bound (drfkit.methods.oracle)"),
+        "ablation": Section("ablation_", {
+            "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
+            "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
+            "seeds": Spec(list[int], _SEEDS, _seeds),
+            "round2": Section("round2_", {
+                "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS,
+                               "budget of the second round: how the models are fit (drfkit.methods.protocols.ROUND2_VARIANTS)"),
+                "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
+                "seeds": Spec(list[int], _SEEDS, _seeds),
+            }),
+        }),
+        "regime": Section("regime_", {
+            "train_noise": Spec(list[float], "a non-empty list of distinct numbers in [0, 1] that holds 0.5",
+                                lambda v: 0.5 in v and all(map(_in01, v)) and len(set(v)) == len(v),
+                                "max noise levels the noise-regime map trains at (drfkit.study.regime; 0.5 is the "
+                                "book's own protocol, others are drfkit.methods.protocols.regime_variant)"),
+            "seeds": Spec(list[int], _SEEDS, _seeds),
+            "test_sequences": Spec(int, *_POSITIVE, "sequences of the regime map's own test split (every level)"),
+        }),
+    }, "notebook 01's dynamics study"),
+    "pedestrians": Section("ped_", {
+        "source": Spec(str, "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
+        "nuscenes_root": Spec(str, "'' (none) or a folder holding <nuscenes_version>/sample.json ...",
+                              name="nuscenes_root"),
+        "nuscenes_version": Spec(str, "e.g. 'v1.0-mini' or 'v1.0-trainval'", lambda v: len(v) > 0,
+                                 name="nuscenes_version"),
+        "pifpaf_predictions": Spec(str, "'' (none) or a folder with one sub-folder of PifPaf JSON per noise level",
+                                   name="pifpaf_predictions"),
+        "n_scenes": Spec(int, "an integer >= 3 (train/val/test split by scene)", lambda v: v >= 3),
+        "frames_per_scene": Spec(int, "an integer >= 2", lambda v: v >= 2),
+        "train_p": Spec(float, "a number in [0, 1]", _in01),
+        "eval_p": Spec(list[float], _LEVELS, _levels),
+        "sweep_p": Spec(list[float], _LEVELS, _levels),
+        "seq_len": Spec(int, *_POSITIVE),
+        "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
+        "sim_detector": Spec(dict, "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)",
+                             name="sim_detector"),
+        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty,
+                       registry="pedestrians"),
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+        "protocols": Spec(list[str], f"a non-empty subset of {list(PEDESTRIAN_PROTOCOLS)} that holds 'paper', "
+                                     "without repeats",
+                          lambda v: "paper" in v and set(v) <= set(PEDESTRIAN_PROTOCOLS) and len(set(v)) == len(v),
+                          "the training protocols notebook 02 trains and notebooks 03 and 05 judge "
+                          "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)"),
+    }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
+    "monoloco": Section("monoloco_", {
+        "epochs": Spec(int, *_POSITIVE),
+        "batch_size": Spec(int, *_POSITIVE),
+        "lr": Spec(float, *_RATE),
+    }, "Monoloco's own schedule"),
+    "evaluation": Section("eval_", {
+        "studies": Spec(list[str], "a non-empty subset of {options}, without repeats", _names,
+                        "which studies notebooks 03 and 05 evaluate (both, unless one's models are not trained "
+                        "yet: its claims are then listed as not evaluated)", registry="*"),
+    }),
+    "uncertainty": Section("", {
+        "n_samples": Spec(int, "an integer >= 1 (Monte Carlo dropout passes)", lambda v: v >= 1),
+        "dropout_rates": Spec(list[float], "a non-empty list of numbers in [0, 1)",
+                              lambda v: len(v) > 0 and all(0 <= x < 1 for x in v)),
+        "interval_level": Spec(float, "a number in (0, 1), e.g. 0.95", lambda v: 0 < v < 1),
+    }),
+    "timing": Section("timing_", {
+        "batch_sizes": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
+        "threads": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
+        "min_run_time": Spec(float, "seconds > 0 per measurement", lambda v: v > 0),
+    }),
+    "gating": Section("gating_", {
+        "picp_tolerance": Spec(float, "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),
+        "sweep_points": Spec(int, "an integer >= 2", lambda v: v >= 2),
+        "timing_frames": Spec(int, "an integer >= 0 (0 = every test frame)", lambda v: v >= 0,
+                              "about this many real frames, of evenly spaced test sequences, are what the gating "
+                              "times are measured on; metrics use every test sequence"),
+    }),
+})
+
+
+def _flatten_schema(section: Section, prefix: str = "", path: tuple[str, ...] = ()):
+    for key, item in section.keys.items():
+        if isinstance(item, Section):
+            yield from _flatten_schema(item, prefix + item.prefix, path + (key,))
+        else:
+            yield (item.name or prefix + key), path + (key,), item
+
+
+# the flat (notebook) name of every parameter -> its spec, and -> its path in the YAML profile
+SPECS: dict[str, Spec] = {name: spec for name, _, spec in _flatten_schema(SCHEMA)}
+PATHS: dict[str, tuple[str, ...]] = {name: path for name, path, _ in _flatten_schema(SCHEMA)}
+_BY_PATH = {".".join(path): name for name, path in PATHS.items()}
+assert len(SPECS) == len(_BY_PATH), "two parameters share a notebook name"
+
+
+
+def flat_name(*path: str) -> str:
+    """The notebook (flat) name of the parameter at ``path``: ``flat_name("pendulum", "book", "epochs")`` is
+    'pend_book_epochs'. Checkpoint and cache hashes name parameters this way, so they outlive the layout."""
+    try:
+        return _BY_PATH[".".join(path)]
+    except KeyError:
+        raise ParameterError(f"no parameter at {'.'.join(path)!r}; known: {sorted(_BY_PATH)}") from None
+
+
+__all__ = ["flat_name", "ParameterError", "Spec", "Section", "SCHEMA", "SPECS", "PATHS"]
