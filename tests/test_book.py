@@ -58,11 +58,11 @@ def test_manifest_check_against_the_real_params_api():
     """notebook_params of a profile, recorded as is, is no problem; one changed value is."""
     from drfkit.study.params import load_profile, notebook_params
 
-    want = notebook_params("04_timing", load_profile("quick"))
+    want = notebook_params("05_timing", load_profile("quick"))
     entry = {"status": "ok", "params": dict(want)}
-    assert booklib.notebook_problems("04_timing", entry, want) == []
+    assert booklib.notebook_problems("05_timing", entry, want) == []
     entry["params"]["timing_batch_sizes"] = [999]
-    assert "timing_batch_sizes" in booklib.notebook_problems("04_timing", entry, want)[0]
+    assert "timing_batch_sizes" in booklib.notebook_problems("05_timing", entry, want)[0]
 
 
 README = """# Title
@@ -111,13 +111,13 @@ def test_claims_page_anchors_each_claim_and_links_its_evidence():
              "rule": "r"},
             {"id": "C1", "protocol": "book", "claim": "a|b", "paper": "p", "ours": "o2", "verdict": "reproduced",
              "rule": "r"}]
-    evidence = {"C1": ("03_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["t.csv", "gone.csv"],
+    evidence = {"C1": ("04_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["t.csv", "gone.csv"],
                        ["f.png"])}
     page = booklib.claims_page(rows, evidence, "paper", ["C1", "C2"], tables=["t.csv"], figures=["f.png"],
                                figures_dir="results/paper/figures")
     assert page.count("(claim-c1)=") == 1 and "(claim-c2)=" not in page and "Not evaluated yet in this profile: C2" in page
     assert page.count("| [C1](#claim-c1) |") == 2 and "a/b" in page
-    assert "(notebooks/03_ood_noise_evaluation.ipynb#claims-c1c5-with-computed-verdicts)" in page
+    assert "(notebooks/04_ood_noise_evaluation.ipynb#claims-c1c5-with-computed-verdicts)" in page
     assert "{ref}`t.csv <table-t>`" in page and "`gone.csv` (not produced)" in page
     assert "[f.png](results/paper/figures/f.png)" in page
     tables = booklib.tables_page({"t.csv": "a,b\n1,0.123456\nx,2\n"}, "paper", "results/paper/tables", max_rows=1)

@@ -175,8 +175,8 @@ def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
     text = (tmp_path / "t" / "claims.md").read_text()
     assert "| C6 |" in text
     # the claims no notebook has filled yet are named, with where they come from
-    assert "Not evaluated yet in this profile: C1 (notebook 03, pendulum); C2" in text
-    assert "C4 (" not in text and "C6 (" not in text and "C7b (notebook 05, pedestrians); F1" in text
+    assert "Not evaluated yet in this profile: C1 (notebook 04, pendulum); C2" in text
+    assert "C4 (" not in text and "C6 (" not in text and "C7b (notebook 06, pedestrians); F1" in text
 
 
 def test_claims_carry_their_protocol_and_old_tables_read_as_the_papers(tmp_path, monkeypatch):

@@ -268,7 +268,7 @@ def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
     from drfkit.study import dynamics, studies
     from drfkit.study.params import for_notebook, load_profile
 
-    P = for_notebook("01_pendulum_training", load_profile("quick"))
+    P = for_notebook("02_pendulum_dynamics", load_profile("quick"))
     asked = []
     monkeypatch.setattr(studies, "pendulum_split", lambda P, split, noise=None: asked.append((split, noise)) or {})
     monkeypatch.setattr(dynamics, "blackout_split", lambda P, split: {})

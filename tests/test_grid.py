@@ -212,13 +212,13 @@ def test_pipeline_trains_the_grid_before_the_notebooks_only_when_asked(tiny, ref
 
     calls = []
     monkeypatch.setattr(pipeline, "run", lambda *a, **k: calls.append(a) or 0)
-    only = ["--only", "01_pendulum_training", "04_timing"]
+    only = ["--only", "01_pendulum_training", "05_timing"]
     assert pipeline.main(["--profile", str(tiny), *only]) == 0  # JOBS=1: sequential, the notebooks train
     assert len(calls) == 1 and not list(results.glob("models/*.pt"))
     assert pipeline.main(["--profile", str(tiny), *only, "--scheduler", cluster]) == 0
     assert len(calls) == 2 and f"grid: {RUNS} trained" in capsys.readouterr().out
     assert_same_checkpoints(results, reference)  # threads: 0 in the profile -> one thread per run
-    assert pipeline.main(["--profile", str(tiny), "--only", "04_timing", "--jobs", "2"]) == 0  # no training notebook
+    assert pipeline.main(["--profile", str(tiny), "--only", "05_timing", "--jobs", "2"]) == 0  # no training notebook
     assert len(calls) == 3
 
 

@@ -24,19 +24,19 @@ def test_manifest_records_environment_and_pipeline(results):
 
 
 def test_notebook_entry_has_params_and_duration(results):
-    timer = NotebookTimer("p", "04_timing", {"seeds": [0]})
-    assert read_manifest("p")["notebooks"]["04_timing"]["status"] == "running"
+    timer = NotebookTimer("p", "05_timing", {"seeds": [0]})
+    assert read_manifest("p")["notebooks"]["05_timing"]["status"] == "running"
     timer.finish()
-    entry = read_manifest("p")["notebooks"]["04_timing"]
+    entry = read_manifest("p")["notebooks"]["05_timing"]
     assert entry["status"] == "ok" and entry["duration_s"] >= 0 and entry["params"] == {"seeds": [0]}
 
 
 def test_start_notebook_validates_and_records(results):
     quick = load_profile("quick")
-    namespace = {k: quick[k] for k in NOTEBOOKS["04_timing"]} | {"profile": "nb"}
-    params, timer = start_notebook("04_timing", dict(namespace, json=json))  # modules are not parameters
+    namespace = {k: quick[k] for k in NOTEBOOKS["05_timing"]} | {"profile": "nb"}
+    params, timer = start_notebook("05_timing", dict(namespace, json=json))  # modules are not parameters
     assert params.uncertainty.n_samples == quick["n_samples"]
-    entry = read_manifest("nb")["notebooks"]["04_timing"]
+    entry = read_manifest("nb")["notebooks"]["05_timing"]
     assert entry["params"]["seeds"] == quick["seeds"]
 
 

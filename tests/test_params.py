@@ -95,24 +95,24 @@ def test_wrong_type_or_range_names_the_key(key, value, fragment):
 
 @pytest.mark.parametrize("value", [[], ["pendulum", "pendulum"], ["nuscenes"], "pendulum"])
 def test_eval_studies_must_be_a_subset_of_the_studies(value):
-    values = quick_subset("03_ood_noise_evaluation") | {"eval_studies": value}
+    values = quick_subset("04_ood_noise_evaluation") | {"eval_studies": value}
     with pytest.raises(ParameterError, match="eval_studies"):
-        validate("03_ood_noise_evaluation", values)
-    ok = validate("05_competency_gating", quick_subset("05_competency_gating") | {"eval_studies": ["pedestrians"]})
+        validate("04_ood_noise_evaluation", values)
+    ok = validate("06_competency_gating", quick_subset("06_competency_gating") | {"eval_studies": ["pedestrians"]})
     assert ok.evaluation.studies == ["pedestrians"]
 
 
 def test_missing_parameter_is_reported():
-    values = quick_subset("04_timing")
+    values = quick_subset("05_timing")
     del values["n_samples"]
     with pytest.raises(ParameterError, match="n_samples"):
-        validate("04_timing", values)
+        validate("05_timing", values)
 
 
 def test_bad_detector_config_is_rejected():
-    values = quick_subset("02_nuscenes_training") | {"sim_detector": {"no_such_field": 1}}
+    values = quick_subset("03_nuscenes_training") | {"sim_detector": {"no_such_field": 1}}
     with pytest.raises(ParameterError, match="sim_detector"):
-        validate("02_nuscenes_training", values)
+        validate("03_nuscenes_training", values)
 
 
 def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
@@ -191,10 +191,10 @@ def test_notebook_stops_in_its_first_cell_on_an_unknown_parameter(tmp_path):
 
     out = tmp_path / "out.ipynb"
     with pytest.raises(pm.PapermillExecutionError) as err:
-        pm.execute_notebook(str(NOTEBOOKS_DIR / "04_timing.ipynb"), str(out),
+        pm.execute_notebook(str(NOTEBOOKS_DIR / "05_timing.ipynb"), str(out),
                             parameters={"n_sample": 25, "profile": "test-params"},
                             progress_bar=False, kernel_name="python3", cwd=str(NOTEBOOKS_DIR))
-    assert "n_sample" in str(err.value) and "04_timing" in str(err.value)
+    assert "n_sample" in str(err.value) and "05_timing" in str(err.value)
     nb = json.loads(out.read_text())
     executed = [c for c in nb["cells"] if c["cell_type"] == "code" and c.get("execution_count")]
     # parameters, injected parameters, validation: nothing after the validation cell ran
@@ -206,12 +206,12 @@ def test_nuscenes_source_names_the_missing_key_before_any_data_is_built(tmp_path
 
     values = load_profile("quick") | {"ped_source": "nuscenes", "nuscenes_root": str(tmp_path), "pifpaf_predictions": ""}
     with pytest.raises(ParameterError, match="needs 'pifpaf_predictions' \\[pedestrians\\.pifpaf_predictions\\] in the profile"):
-        validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
+        validate("03_nuscenes_training", notebook_params("03_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path / "absent")
     with pytest.raises(ParameterError, match=r"'pifpaf_predictions' \[pedestrians\.pifpaf_predictions\] = .*absent' is not a folder"):
-        validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values))
+        validate("03_nuscenes_training", notebook_params("03_nuscenes_training", values))
     values["pifpaf_predictions"] = str(tmp_path)
-    assert validate("02_nuscenes_training", notebook_params("02_nuscenes_training", values)).pedestrians.source == "nuscenes"
+    assert validate("03_nuscenes_training", notebook_params("03_nuscenes_training", values)).pedestrians.source == "nuscenes"
 
 
 def test_keep_outputs_copies_outputs_only_of_unchanged_code_cells(tmp_path):

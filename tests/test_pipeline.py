@@ -18,11 +18,11 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     write_profile(path, values)
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
     proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path),
-                           "--only", "00_data_prep", "04_timing"],
+                           "--only", "00_data_prep", "05_timing"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert "FAILED: notebook 00_data_prep" in proc.stderr and "no GPU" in proc.stderr
-    assert "== 04_timing" not in proc.stdout  # stopped at the first failure
+    assert "== 05_timing" not in proc.stdout  # stopped at the first failure
     executed = tmp_path / "results" / "failing" / "executed"
     assert (executed / "00_data_prep.failed.ipynb").exists()
     assert not (executed / "00_data_prep.ipynb").exists() and not list(executed.glob(".*partial*"))
@@ -47,7 +47,7 @@ def test_overrides_are_parsed_as_yaml_and_checked():
 def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
     proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", "quick", "--only",
-                           "03_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
+                           "04_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]
     assert not (tmp_path / "results" / "quick" / "executed").exists()

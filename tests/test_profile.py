@@ -27,7 +27,7 @@ def test_every_declared_parameter_sits_at_its_schema_path(notebook):
 
 
 def test_sections_are_typed_frozen_dataclasses_named_by_their_path():
-    P = for_notebook("01_pendulum_training", load_profile("quick"))
+    P = for_notebook("02_pendulum_dynamics", load_profile("quick"))
     assert type(P) is Profile and type(P.pendulum).__name__ == "PendulumSection"
     assert type(P.pendulum.book).__name__ == "PendulumBookSection"
     assert type(P.dynamics.ablation.round2).__name__ == "DynamicsAblationRound2Section"
@@ -46,9 +46,9 @@ def test_sections_are_typed_frozen_dataclasses_named_by_their_path():
 
 
 def test_an_undeclared_parameter_is_an_error_that_says_where_to_declare_it():
-    P = for_notebook("04_timing", load_profile("quick"))
+    P = for_notebook("05_timing", load_profile("quick"))
     assert P.uncertainty.n_samples >= 1
-    with pytest.raises(ParameterError, match=r"notebook 04_timing does not declare parameter 'gating_sweep_points' "
+    with pytest.raises(ParameterError, match=r"notebook 05_timing does not declare parameter 'gating_sweep_points' "
                                              r"\[gating\.sweep_points\]; add it .*NOTEBOOKS"):
         P.gating.sweep_points
     bench = for_notebook("bench", load_profile("quick"))
@@ -58,10 +58,10 @@ def test_an_undeclared_parameter_is_an_error_that_says_where_to_declare_it():
 
 def test_a_profile_pickles_with_its_values_and_its_holder():
     """Grid workers receive the profile pickled."""
-    P = for_notebook("02_nuscenes_training", load_profile("quick"))
+    P = for_notebook("03_nuscenes_training", load_profile("quick"))
     Q = pickle.loads(pickle.dumps(P))
     assert Q.as_dict() == P.as_dict() and Q.pedestrians.sim_detector == P.pedestrians.sim_detector
-    with pytest.raises(ParameterError, match="notebook 02_nuscenes_training does not declare"):
+    with pytest.raises(ParameterError, match="notebook 03_nuscenes_training does not declare"):
         Q.gating.sweep_points
 
 

@@ -12,13 +12,13 @@ def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monke
     assert "No results for profile `p` yet" in results_section("p", "make reproduce", False)
     claims.upsert("p", [claims.c6_speedup(3.0)])
     (tmp_path / "p" / "manifest.json").write_text(json.dumps({
-        "pipeline": {"status": "ok", "total_s": 12.0, "notebooks": ["03_ood_noise_evaluation"]},
+        "pipeline": {"status": "ok", "total_s": 12.0, "notebooks": ["04_ood_noise_evaluation"]},
         "overrides": {"eval_studies": ["pedestrians"]},
-        "notebooks": {"03_ood_noise_evaluation": {"status": "ok"}}}))
+        "notebooks": {"04_ood_noise_evaluation": {"status": "ok"}}}))
     pd.DataFrame([{"study": "pendulum", "model": "drf", "epoch_s": 10.0, "epochs": 200, "seeds": 3, "hours": 6.0,
                    "epochs_done": 300, "hours_left": 3.0, "threads": 1}]).to_csv(tmp_path / "p" / "training_budget.csv")
     text = results_section("p", "make reproduce", False)
-    assert "last pipeline run: 03_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
+    assert "last pipeline run: 04_ood_noise_evaluation with --set eval_studies=['pedestrians'], status ok" in text
     assert "| C6 |" in text and "Not evaluated yet in this profile: C1" in text
     assert "**6.0 hours** in all, **3.0 hours left**" in text and "| pendulum | drf | 10 |  |  | 200 × 3 | 300 |" in text
     assert "Pendulum training speed" not in text  # no notebook 01 table yet
@@ -106,10 +106,10 @@ def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, mon
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     claims.upsert("p", [claims.c6_speedup(3.0)])
     (tmp_path / "p" / "manifest.json").write_text(json.dumps({
-        "pipeline": {"status": "interrupted", "total_s": None, "notebooks": ["05_competency_gating"],
-                     "note": "killed during 05_competency_gating"}}))
+        "pipeline": {"status": "interrupted", "total_s": None, "notebooks": ["06_competency_gating"],
+                     "note": "killed during 06_competency_gating"}}))
     text = results_section("p", "make reproduce", False)
-    assert "status interrupted: killed during 05_competency_gating" in text and "None s" not in text
+    assert "status interrupted: killed during 06_competency_gating" in text and "None s" not in text
 
 
 def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path):
@@ -125,7 +125,13 @@ def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path)
     text = "\n".join(dynamics_lines(tmp_path))
     assert "| paper | DRF (ours) | 0.0200 | 0.5500 | 0.05 | 0.92 | 7.90 |" in text
     assert "| book | DRF (ours) | 0.0100 | 0.0800 | 0.90 | 0.20 | 0.70 |" in text
-    assert "| — | true-physics bound | 0.0060 | 0.0330 |" in text
+    assert "| — | true-physics bound on its no_dynamics | 0.0060 | 0.0330 |" in text
+    # each protocol's bound on its own no_dynamics, once notebook 02 has written them (like for like)
+    pd.DataFrame({"protocol": ["paper", "paper", "book", "book"], "seed": [0] * 4, "noise": ["0.5", "blackout"] * 2,
+                  "mae": [0.006, 0.033, 0.004, 0.021]}).to_csv(tmp_path / "pendulum_physics_bound_protocols.csv", index=False)
+    text = "\n".join(dynamics_lines(tmp_path))
+    assert "| paper | true-physics bound on its no_dynamics | 0.0060 | 0.0330 |" in text
+    assert "| book | true-physics bound on its no_dynamics | 0.0040 | 0.0210 |" in text and "| — |" not in text
     pd.DataFrame({"variant": ["book", "book", "paper"], "kind": ["drf"] * 3, "seed": [0, 1, 0], "budget": ["small"] * 3,
                   "mae_0.5": [0.01, 0.03, 0.02], "mae_blackout": [0.1, 0.2, 0.5]}).to_csv(tmp_path / "pendulum_ablation.csv",
                                                                                        index=False)
@@ -156,14 +162,14 @@ def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tm
                    "rule": "r"} for i, p, v in rows]).to_csv(tmp_path / "claims.csv", index=False)
     lines = claims_summary_table(tmp_path / "claims.csv")
     assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol | judged in |"
-    assert lines[2].startswith("| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** | [03_ood_noise_evaluation")
+    assert lines[2].startswith("| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** | [04_ood_noise_evaluation")
     assert lines[3].startswith("| C4 | claim C4 | 1 / 2 | **reproduced** (simulated source) | — | ")
     assert "(tables/ood_all_metrics.csv)" in lines[3]  # every claim links its notebook, tables and figures
     pd.DataFrame([{"id": "C4", "protocol": "paper", "claim": "c", "paper": "p", "ours": "x", "verdict": "partly",
                    "rule": "r"}]).to_csv(tmp_path / "claims.csv", index=False)
     table = claims_summary_table(tmp_path / "claims.csv")
     assert table[:2] == ["| id | claim | paper | verdict | judged in |", "|---|---|---|---|---|"]
-    assert table[2].startswith("| C4 | c | p | **partly** (simulated source) | [03_ood_noise_evaluation")
+    assert table[2].startswith("| C4 | c | p | **partly** (simulated source) | [04_ood_noise_evaluation")
 
 
 def test_every_claim_links_evidence_that_the_paper_profile_has():

@@ -77,7 +77,7 @@ def test_patience_does_not_rename_checkpoints(tiny_profile):
 
 
 def test_monoloco_trains_on_its_published_schedule_and_the_family_on_the_profile(tiny_profile):
-    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile)))
+    P = validate("03_nuscenes_training", notebook_params("03_nuscenes_training", load_profile(tiny_profile)))
     mono = studies.train_config(P, "pedestrians", "monoloco", 0)
     assert (mono.lr_step, mono.lr_gamma, mono.framewise, mono.grad_clip, mono.select_on) == (20, 0.9, True, None, "l1")
     assert (mono.epochs, mono.lr, mono.batch_size) == (P.monoloco.epochs, P.monoloco.lr, P.monoloco.batch_size)
@@ -97,7 +97,7 @@ def test_monoloco_trains_on_its_published_schedule_and_the_family_on_the_profile
 
 
 def test_a_diagnostic_variant_has_its_own_name_and_the_published_model_keeps_its_own(tiny_profile):
-    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile)))
+    P = validate("03_nuscenes_training", notebook_params("03_nuscenes_training", load_profile(tiny_profile)))
     published = studies.model_config("pedestrians", "monoloco", P)
     detected = studies.model_config("pedestrians", "monoloco", P, options={"inputs": "detected"})
     assert "inputs" not in published and detected == published | {"inputs": "detected"}
@@ -106,7 +106,7 @@ def test_a_diagnostic_variant_has_its_own_name_and_the_published_model_keeps_its
 
 
 def test_target_statistics_read_the_training_split_once(tiny_profile, monkeypatch):
-    P = validate("02_nuscenes_training", notebook_params("02_nuscenes_training", load_profile(tiny_profile))
+    P = validate("03_nuscenes_training", notebook_params("03_nuscenes_training", load_profile(tiny_profile))
                  | {"ped_n_scenes": 4, "ped_frames_per_scene": 4, "ped_data_seed": 77})
     reads = []
     real = pedestrian_runs.pedestrian_data

@@ -14,7 +14,7 @@ A screenshot of each page lands in results/<profile>/book/screenshots/. Exit sta
 1: a check failed (each is named); 2: the book, playwright or chromium is missing (with how to
 get it).
 
-    python tools/check_book.py --profile paper [--notebook 03_ood_noise_evaluation] [--chromium PATH]
+    python tools/check_book.py --profile paper [--notebook 04_ood_noise_evaluation] [--chromium PATH]
 """
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--profile", default="paper")
     ap.add_argument("--book", type=Path, help="default: results/<profile>/book")
-    ap.add_argument("--notebook", default="03_ood_noise_evaluation", help="the notebook page to check")
+    ap.add_argument("--notebook", default="04_ood_noise_evaluation", help="the notebook page to check")
     ap.add_argument("--query", default="Kalman", help="what to search for on the search page")
     ap.add_argument("--chromium", help="the browser binary (default: chromium on PATH)")
     ap.add_argument("--timeout", type=float, default=30.0, help="seconds per page")

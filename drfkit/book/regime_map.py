@@ -1,5 +1,5 @@
 """``python -m drfkit regime``: the noise-regime map of a profile (``drfkit.study.regime``) trained,
-evaluated and written as tables and a figure, as notebook 01 writes them (``write_outputs``).
+evaluated and written as tables and a figure, as notebook 02 writes them (``write_outputs``).
 Here, in the book layer, because it writes through ``drfkit.report``.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ from drfkit.study.regime import profile_map, regime_summary
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m drfkit regime --profile paper``: train what the profile's regime map misses
-    (one thread), evaluate it, write its tables and figure (as notebook 01 does) and print the
+    (one thread), evaluate it, write its tables and figure (as notebook 02 does) and print the
     seed-mean summary."""
     import argparse
 
@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--profile", default="paper")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
-    P = for_command("01_pendulum_training", args.profile)
+    P = for_command("02_pendulum_dynamics", args.profile)
     if P is None:
         return 2
     torch.set_num_threads(args.threads)

@@ -1,7 +1,7 @@
 """Each MC-dropout prediction computed once: a cache on disk shared by every notebook.
 
-Notebooks 01, 03 and 05 evaluate the same checkpoints on the same test sets (01's table at
-the paper's levels is part of 03's sweep; 03's dropout-rate curves repeat 01's). A prediction
+Notebooks 01, 02, 04 and 06 evaluate the same checkpoints on the same test sets (01's table at
+the paper's levels is part of 04's sweep; 04's dropout-rate curves repeat 01's). A prediction
 is fixed by what went into it, so the cache file is named by the hash of exactly that:
 
     key = the model's content (sha256 of its configuration and every weight), the inputs'

@@ -8,7 +8,7 @@ the same way:
 * ``paper`` -- the paper as written: LSTM transition network, ELU + 1 observation variance,
   every latent dim observed, training frames as the benchmark makes them.
 * ``book``  -- the book's protocol, chosen on validation data by the ablation's second round
-  (notebook 01): the DRF whose filter filters -- a locally linear transition with no memory of its
+  (notebook 02): the DRF whose filter filters -- a locally linear transition with no memory of its
   own (``drfkit.models.basis``), 15 of the 30 latent dims unobserved (room for velocity), r on a
   bounded log scale, the mean decoded from z alone and sigma from P alone, the one-step prior fitted
   as well as the posterior -- trained with the recipe that fits the mean (``FIT_THE_MEAN``) on
@@ -165,5 +165,7 @@ def summarise_ablation(table: pd.DataFrame) -> pd.DataFrame:
     """Mean over seeds per variant (and the number of seeds), sorted by the blackout MAE."""
     cols = [c for c in SUMMARY_COLUMNS if c in table]
     grouped = table.groupby(["variant", "kind"])
-    return (grouped[cols].mean().join(grouped.size().rename("n_seeds"))
-            .sort_values("mae_blackout").round(4).reset_index())
+    summary = grouped[cols].mean().join(grouped.size().rename("n_seeds"))
+    if "current" in table:  # a variant counts as current only if every seed's row is
+        summary = summary.join(grouped["current"].all())
+    return summary.sort_values("mae_blackout").round(4).reset_index()

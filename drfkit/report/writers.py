@@ -61,12 +61,12 @@ HEADLINE_FIGURES = [
 
 
 def epoch_times_line(epochs: pd.DataFrame) -> str:
-    """One sentence of a ``drfkit.methods.timing.epoch_times`` table (notebook 04); the first row is the base."""
+    """One sentence of a ``drfkit.methods.timing.epoch_times`` table (notebook 05); the first row is the base."""
     base = epochs["model"].iloc[0]
     rows = epochs.set_index("model")
     others = [f"{model} **{row[f'ratio_to_{base}']:.2f}×** (IQR {row[f'ratio_to_{base}_iqr']:.2f}; "
               f"{row['epoch_median_s']:.3g} s)" for model, row in rows.iloc[1:].iterrows()]
-    return (f"Whole training epochs in notebook 04 (the training loop itself, validation and checkpoints "
+    return (f"Whole training epochs in notebook 05 (the training loop itself, validation and checkpoints "
             f"included, {int(rows['rounds'].iloc[0])} interleaved rounds, {int(rows['threads'].iloc[0])} torch "
             f"thread(s), {int(rows['sequences'].iloc[0])} sequences): against a {base} epoch of "
             f"{rows.loc[base, 'epoch_median_s']:.3g} s, " + ", ".join(others) + "; target ≤ 1.5× for the DRF "
@@ -74,7 +74,7 @@ def epoch_times_line(epochs: pd.DataFrame) -> str:
 
 
 def recursion_scaling_line(scaling: pd.DataFrame) -> str:
-    """One sentence per thread count of a ``drfkit.methods.timing.recursion_scaling`` table (notebook 04)."""
+    """One sentence per thread count of a ``drfkit.methods.timing.recursion_scaling`` table (notebook 05)."""
     parts = []
     for threads, rows in scaling.groupby("threads"):
         step = rows[(rows["model"] == "drf") & (rows["part"] == "step")].iloc[0]
@@ -84,14 +84,14 @@ def recursion_scaling_line(scaling: pd.DataFrame) -> str:
                      f"time against the batch), and without that cost the DRF step would cost "
                      f"**{step['floor_ratio']:.2f}×** a no_dynamics step instead of {step['ratio']:.2f}× (the step ratio timed in "
                      f"this same run; the training-speed line times steps in a separate run)")
-    return ("Per-call cost or arithmetic, in notebook 01 (the recursion alone at half, one and two times the batch, "
+    return ("Per-call cost or arithmetic, in notebook 05 (the recursion alone at half, one and two times the batch, "
             "in one run with both training steps): " + "; ".join(parts)
             + " (`tables/pendulum_recursion_scaling.csv`, `figures/pendulum_recursion_scaling.png`).")
 
 
 def dynamics_lines(tables: Path) -> list[str]:
-    """README lines of the dynamics study (notebook 01): both protocols beside the true-physics
-    bound, and the protocol ablation on validation data; [] when notebook 01 has not written them."""
+    """README lines of the dynamics study (notebook 02): both protocols beside the true-physics
+    bound, and the protocol ablation on validation data; [] when notebook 02 has not written them."""
     lines: list[str] = []
     protocols, bound = tables / "pendulum_protocols.csv", tables / "pendulum_physics_bound.csv"
     if protocols.exists() and bound.exists():
@@ -102,7 +102,7 @@ def dynamics_lines(tables: Path) -> list[str]:
         lines += ["Does the filter filter? Test MAE (MC dropout mean, seed means) of each protocol's models beside "
                   "the true-physics bound (a particle filter with the generator's equations on no_dynamics' "
                   "per-frame estimates: knowledge no learned model has), and the DRF's mechanism checks "
-                  "(`tables/pendulum_protocols.csv`, `tables/pendulum_physics_bound.csv`, notebook 01):", "",
+                  "(`tables/pendulum_protocols.csv`, `tables/pendulum_physics_bound.csv`, notebook 02):", "",
                   "| protocol | model | " + " | ".join(c.replace("mae_", "MAE ") for c in mae_cols)
                   + " | rank corr(r, noise) | gain pure / clean | ‖Fz − w‖ / ‖z − w‖ |",
                   "|---|---|" + "---|" * (len(mae_cols) + 3)]
@@ -111,9 +111,16 @@ def dynamics_lines(tables: Path) -> list[str]:
             lines.append(f"| {protocol} | {label(model)} | " + " | ".join(fmt(r[c]) for c in mae_cols) + " | "
                          + " | ".join(fmt(r.get(c), 2) for c in ("r_noise_spearman", "gain_ratio_blackout", "prior_ratio"))
                          + " |")
-        # the bound's noise column holds levels and 'blackout': name them as the protocol table's columns
-        bound_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in b.items()}
-        lines += ["| — | true-physics bound | " + " | ".join(fmt(bound_of.get(c)) for c in mae_cols) + " | | | |", ""]
+        # each protocol's bound on its own no_dynamics when notebook 02 wrote them (like for like), else the
+        # paper protocol's; the noise column holds levels and 'blackout': named as the protocol table's columns
+        per_protocol = tables / "pendulum_physics_bound_protocols.csv"
+        bounds = ({name: g.groupby("noise")["mae"].mean() for name, g in
+                   pd.read_csv(per_protocol).groupby("protocol", sort=False)} if per_protocol.exists() else {"—": b})
+        for name, bp in bounds.items():
+            bound_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in bp.items()}
+            lines.append(f"| {name} | true-physics bound on its no_dynamics | "
+                         + " | ".join(fmt(bound_of.get(c)) for c in mae_cols) + " | | | |")
+        lines.append("")
     ablation = tables / "pendulum_ablation.csv"
     if ablation.exists():
         raw = pd.read_csv(ablation)
@@ -277,7 +284,7 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
                 notes.append(f"its counted arithmetic is {drf['flop_ratio_to_no_dynamics']:.2f}× a no_dynamics step's "
                              f"({drf['gflop']:.3g} against {nd['gflop']:.3g} GFLOP of matrix products and "
                              f"convolutions), run at {drf['gflop_per_s'] / nd['gflop_per_s']:.2f}× its rate")
-            lines += [f"Pendulum training speed in notebook 04 (one run, {int(sp['threads'].iloc[0])} torch "
+            lines += [f"Pendulum training speed in notebook 05 (one run, {int(sp['threads'].iloc[0])} torch "
                       f"thread(s), batch {int(sp['batch'].iloc[0])} × {int(sp['frames'].iloc[0])} frames): a DRF step "
                       f"costs **{drf['ratio_to_no_dynamics']:.2f}×** a no_dynamics step ("
                       + "; ".join(notes) + "; `tables/pendulum_training_speed.csv`).", ""]

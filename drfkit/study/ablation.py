@@ -137,11 +137,24 @@ def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Pat
     return row
 
 
+def _is_current(row: dict, budget_name: str, out: str | Path | None) -> bool:
+    """Whether a row was trained by what this code would train now (same variant, schedule, data
+    seed and frames): rows kept from before a change (the former OpenCV frames, a retired
+    variant) stay readable but are marked, never mistaken for a rerun."""
+    try:
+        return row.get("key") == _run(row["variant"], int(row["seed"]), budget_name, out)[3]
+    except ValueError:  # a variant no longer defined
+        return False
+
+
 def ablation_table(budget_name: str = "small", out: str | Path | None = None) -> pd.DataFrame:
-    """Every finished row of a budget, one per (variant, seed), without the per-frame curve."""
+    """Every finished row of a budget, one per (variant, seed), without the per-frame curve;
+    ``current`` is False for a row the present code would train differently (``_is_current``)."""
     folder = (Path(out) if out is not None else results_root() / "ablation") / budget_name
     rows = [json.loads(p.read_text()) for p in sorted(folder.glob("*-seed*.json"))]
     frame = pd.DataFrame(rows)
+    if rows:
+        frame["current"] = [_is_current(r, budget_name, out) for r in rows]
     return frame.drop(columns=["mae_per_frame_blackout", "key"], errors="ignore")
 
 

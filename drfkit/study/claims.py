@@ -33,7 +33,7 @@ SATURATED_PICP = 0.995
 # always dropping out, so PICP near always-dropout (or near random gating) follows from the
 # fraction itself, not from the Kalman gain.
 GATE_FRACTION_RANGE = (0.10, 0.90)
-# Notebook 04's two targets of the book (not claims of the paper; C6 judges the paper's 2.93x):
+# Notebook 05's two targets of the book (not claims of the paper; C6 judges the paper's 2.93x):
 # DRF's S-sample prediction at least 3x faster per frame than Monoloco as published at batch 1,
 # because the paper's claim is "~3x faster" and the book's DRF should meet that round figure itself.
 TIMING_SPEEDUP_TARGET = 3.0
@@ -49,32 +49,35 @@ def _at_most(value: float, limit: float) -> bool:
 COLUMNS = ["id", "protocol", "claim", "paper", "ours", "rule", "verdict"]
 # Every claim row and what fills it: claims.md lists the ones a profile has not evaluated yet.
 CLAIM_SOURCES = {
-    "C1": "notebook 03, pendulum", "C2": "notebook 03, pendulum", "C3": "notebook 03, pedestrians",
-    "C4": "notebook 03, pedestrians", "C5": "notebook 03, both studies", "C6": "notebook 04",
-    "C7a": "notebook 05, pendulum", "C7b": "notebook 05, pedestrians",
-    "F1": "notebook 01, pendulum", "F2": "notebook 01, pendulum",
+    "C1": "notebook 04, pendulum", "C2": "notebook 04, pendulum", "C3": "notebook 04, pedestrians",
+    "C4": "notebook 04, pedestrians", "C5": "notebook 04, both studies", "C6": "notebook 05",
+    "C7a": "notebook 06, pendulum", "C7b": "notebook 06, pedestrians",
+    "F1": "notebook 02, pendulum", "F2": "notebook 02, pendulum",
 }
 
 
 # Where each claim is judged: the notebook and its section, the tables and figures the verdict reads
 # (under results/<profile>/; a protocol other than the paper's has its figures as <study>_<protocol>_...).
 CLAIM_EVIDENCE = {
-    "C1": ("03_ood_noise_evaluation", "Claims C1–C5, with computed verdicts",
+    "C1": ("04_ood_noise_evaluation", "Claims C1–C5, with computed verdicts",
            ["ood_all_metrics.csv", "ood_all_metrics_by_seed.csv"], ["pendulum_mae.png"]),
-    "C2": ("03_ood_noise_evaluation", "The paper's figures, redrawn", ["ood_picp_mpiw.csv"], ["pendulum_picp_mpiw.png"]),
-    "C3": ("03_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["ood_all_metrics_by_seed.csv"],
+    "C2": ("04_ood_noise_evaluation", "The paper's figures, redrawn", ["ood_picp_mpiw.csv"], ["pendulum_picp_mpiw.png"]),
+    "C3": ("04_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["ood_all_metrics_by_seed.csv"],
            ["pedestrians_mae.png"]),
-    "C4": ("03_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["ood_all_metrics.csv"],
+    "C4": ("04_ood_noise_evaluation", "Claims C1–C5, with computed verdicts", ["ood_all_metrics.csv"],
            ["pedestrians_mae.png"]),
-    "C5": ("03_ood_noise_evaluation", "The paper's figures, redrawn", ["ood_all_metrics.csv", "ood_picp_mpiw.csv"],
+    "C5": ("04_ood_noise_evaluation", "The paper's figures, redrawn", ["ood_all_metrics.csv", "ood_picp_mpiw.csv"],
            ["pendulum_picp_mpiw.png", "pedestrians_picp_mpiw.png"]),
-    "C6": ("04_timing", "Claim C6 and the targets", ["timing.csv"], ["timing_ms_per_frame.png"]),
-    # (after the next paper rerun, gating_summary_train_noise.csv holds the judged gates: add it here)
-    "C7a": ("05_competency_gating", "Claim C7, with computed verdicts", ["gating_summary.csv"], ["gating_sweep.png"]),
-    "C7b": ("05_competency_gating", "Claim C7, with computed verdicts", ["gating_summary.csv"], ["gating_sweep.png"]),
-    "F1": ("01_pendulum_training", "Does the filter filter?", ["pendulum_mechanism.csv"], []),
-    "F2": ("01_pendulum_training", "Blackout: does the state coast?",
-           ["pendulum_blackout.csv", "pendulum_physics_bound.csv"], ["pendulum_blackout.png"]),
+    "C6": ("05_timing", "Claim C6 and the targets", ["timing.csv"], ["timing_ms_per_frame.png"]),
+    # the judged gates are tuned at the training noise (gating_summary_train_noise.csv); gating_summary.csv
+    # holds the gates tuned out of distribution, a labelled second row
+    "C7a": ("06_competency_gating", "Claim C7, with computed verdicts",
+            ["gating_summary_train_noise.csv", "gating_summary.csv"], ["gating_sweep.png"]),
+    "C7b": ("06_competency_gating", "Claim C7, with computed verdicts",
+            ["gating_summary_train_noise.csv", "gating_summary.csv"], ["gating_sweep.png"]),
+    "F1": ("02_pendulum_dynamics", "Does the filter filter?", ["pendulum_mechanism.csv", "pendulum_protocols.csv"], []),
+    "F2": ("02_pendulum_dynamics", "Blackout: does the state coast?",
+           ["pendulum_blackout.csv", "pendulum_physics_bound_protocols.csv"], ["pendulum_blackout_protocols.png"]),
 }
 # Claims whose evidence is the simulated pedestrian source by default (pedestrians.source: simulated)
 PEDESTRIAN_CLAIMS = ("C3", "C4", "C7b")
@@ -365,7 +368,7 @@ def c7_gating(table: pd.DataFrame, study: str, ood_tuned: pd.DataFrame | None = 
             "verdict": verdict}
 
 
-# --------------------------------------------------------- a diagnostic beside C4 (notebook 02)
+# --------------------------------------------------------- a diagnostic beside C4 (notebook 03)
 # Monoloco fed the DRF family's inputs closes this share of its in-distribution gap to no_dynamics or
 # more: the gap is mostly its published inputs (else mostly its network, loss or schedule). Half,
 # because it splits the gap into the larger and the smaller part.

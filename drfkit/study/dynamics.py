@@ -272,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args(argv)
-    P = for_command("01_pendulum_training", args.profile)
+    P = for_command("02_pendulum_dynamics", args.profile)
     if P is None:
         return 2
     setup(args.threads, P.seeds[0], "cpu")

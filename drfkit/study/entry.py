@@ -34,7 +34,7 @@ class Study:
     models_key: str                # key in that section: the models a profile trains
     train_level_key: str           # key in that section: the training noise
     eval_levels_key: str           # key in that section: the test noise levels of the paper's tables
-    sweep_key: str                 # key in that section: the noise sweep of notebook 03
+    sweep_key: str                 # key in that section: the noise sweep of notebook 04
     training_notebook: str         # the notebook that trains the study's models
     noise_kind: str                # drfkit.data.noise.NOISE_KINDS: what the study's noise levels mean
     protocols_key: str             # key in that section: the training protocols (a list that holds 'paper')

@@ -1,5 +1,5 @@
 """The gating study: a gate fitted on validation data (``drfkit.methods.gating.fit_gate``) applied to
-the TEST set, timed, and swept over thresholds; the profile-driven study of notebook 05
+the TEST set, timed, and swept over thresholds; the profile-driven study of notebook 06
 (``gating_study``, ``train_noise_gates``) and the paper's table beside it.
 
 The test set enters only here, through ``evaluate_gate`` / ``sweep_gate``, which apply a fitted

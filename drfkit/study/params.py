@@ -49,16 +49,17 @@ _EVAL = ["eval_studies"]
 
 NOTEBOOKS: dict[str, list[str]] = {
     "00_data_prep": _COMMON + _PEND_DATA + _PED_DATA,
-    "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
-    "02_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
-    "03_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
-    "04_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
-    "05_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
+    "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC,
+    "02_pendulum_dynamics": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
+    "03_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
+    "04_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
+    "05_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
+    "06_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }
 
 
 # what a command line reads when it needs less than a notebook's whole set: the inference benchmark
-# (``python -m drfkit bench``) reads notebook 04's timing keys, not the pendulum's that its training-speed
+# (``python -m drfkit bench``) reads notebook 05's timing keys, not the pendulum's that its training-speed
 # part needs
 COMMANDS: dict[str, list[str]] = {"bench": _COMMON + ["n_samples"] + _TIMING, "simstats": _COMMON + _PED_DATA}
 

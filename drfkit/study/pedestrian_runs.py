@@ -185,7 +185,7 @@ def pedestrian_train_config(P, kind: str, seed: int, protocol: str = "paper") ->
 PEDESTRIANS = Study(
     "pedestrians", "keypoints", 1, ("drf", "no_dynamics", "lstm", "monoloco"), section="pedestrians",
     models_key="models", train_level_key="train_p", eval_levels_key="eval_p", sweep_key="sweep_p",
-    training_notebook="02_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="protocols",
+    training_notebook="03_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="protocols",
     all_protocols=tuple(PEDESTRIAN_PROTOCOLS), data=pedestrian_data, data_key=pedestrian_data_key,
     model_options=pedestrian_model_options, train_config=pedestrian_train_config,
     noise_name="salt-and-pepper p", target_name="depth", target_unit="(m)")

@@ -101,7 +101,7 @@ SCHEMA = Section("", {
                          "stop a run after this many epochs without a better validation NLL"),
         "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
                           lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebook 01 trains and evaluates (drfkit.methods.protocols)"),
+                          "the training protocols notebooks 01 and 02 train and evaluates (drfkit.methods.protocols)"),
         "book": Section("book_", {
             "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
             "batch_size": Spec(int, *_POSITIVE),
@@ -132,7 +132,7 @@ SCHEMA = Section("", {
             "seeds": Spec(list[int], _SEEDS, _seeds),
             "test_sequences": Spec(int, *_POSITIVE, "sequences of the regime map's own test split (every level)"),
         }),
-    }, "notebook 01's dynamics study"),
+    }, "notebook 02's dynamics study"),
     "pedestrians": Section("ped_", {
         "source": Spec(str, "'simulated' or 'nuscenes'", lambda v: v in ("simulated", "nuscenes")),
         "nuscenes_root": Spec(str, "'' (none) or a folder holding <nuscenes_version>/sample.json ...",
@@ -158,7 +158,7 @@ SCHEMA = Section("", {
         "protocols": Spec(list[str], f"a non-empty subset of {list(PEDESTRIAN_PROTOCOLS)} that holds 'paper', "
                                      "without repeats",
                           lambda v: "paper" in v and set(v) <= set(PEDESTRIAN_PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebook 02 trains and notebooks 03 and 05 judge "
+                          "the training protocols notebook 03 trains and notebooks 04 and 06 judge "
                           "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)"),
     }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
     "monoloco": Section("monoloco_", {
@@ -168,7 +168,7 @@ SCHEMA = Section("", {
     }, "Monoloco's own schedule"),
     "evaluation": Section("eval_", {
         "studies": Spec(list[str], "a non-empty subset of {options}, without repeats", _names,
-                        "which studies notebooks 03 and 05 evaluate (both, unless one's models are not trained "
+                        "which studies notebooks 04 and 06 evaluate (both, unless one's models are not trained "
                         "yet: its claims are then listed as not evaluated)", registry="*"),
     }),
     "uncertainty": Section("", {

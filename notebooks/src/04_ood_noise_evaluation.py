@@ -1,5 +1,5 @@
 # %% [markdown]
-# # 03 · Out-of-distribution evaluation and the claims
+# # 04 · Out-of-distribution evaluation and the claims
 #
 # The paper's central claim is that a recursive filter inside the network makes state *and*
 # uncertainty estimates more robust when the test noise leaves the training distribution. This
@@ -17,7 +17,7 @@
 # No threshold or model choice here looks at the test sets: models were selected on validation NLL.
 # Each study is evaluated under every training protocol of its profile (`pend_protocols`, `ped_protocols`;
 # `drfkit.methods.protocols`: the paper's as written, and the book's, under which the DRF's filter is
-# checked to filter in notebook 01 and the pedestrians' DRF family is fit with β-NLL); every claim gets a
+# checked to filter in notebook 02 and the pedestrians' DRF family is fit with β-NLL); every claim gets a
 # verdict per protocol. Monoloco trains one set of runs under both.
 # `eval_studies` names the studies evaluated (both by default); a study left out — for instance
 # while its paper-scale training is still running — has its claims listed as not evaluated.
@@ -27,7 +27,7 @@
 # %%
 from drfkit.book.runtime import start_notebook
 
-P, timer = start_notebook("03_ood_noise_evaluation", globals())
+P, timer = start_notebook("04_ood_noise_evaluation", globals())
 
 # %%
 import matplotlib.pyplot as plt
@@ -170,7 +170,7 @@ for group in groups:
 # %% [markdown]
 # ## Claims C1–C5, with computed verdicts
 # Each rule is written in the table next to its verdict (`drfkit.study.claims`); the timing (C6) and
-# gating (C7) rows are added by notebooks 04 and 05. C1 and C2 need the pendulum, C3 and C4 the
+# gating (C7) rows are added by notebooks 05 and 06. C1 and C2 need the pendulum, C3 and C4 the
 # pedestrians, C5 is judged on the out-of-distribution levels of the studies evaluated, over the same
 # PICP–MPIW curves as C2. Every claim is judged once per protocol, on each study's models of that
 # protocol (a study that does not train a protocol is judged in it on its paper-protocol models).

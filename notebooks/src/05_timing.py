@@ -1,5 +1,5 @@
 # %% [markdown]
-# # 04 · Timing: what uncertainty costs per frame
+# # 05 · Timing: what uncertainty costs per frame
 #
 # The paper reports that DRF computes its aleatoric and epistemic uncertainty about 3× faster than
 # Monoloco: 12.3 ms against 36.1 ms for "25 forward passes", after the PifPaf keypoint extraction
@@ -56,7 +56,7 @@
 # %%
 from drfkit.book.runtime import start_notebook
 
-P, timer = start_notebook("04_timing", globals())
+P, timer = start_notebook("05_timing", globals())
 
 # %%
 import os

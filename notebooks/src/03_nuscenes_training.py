@@ -1,5 +1,5 @@
 # %% [markdown]
-# # 02 · Pedestrians: training DRF, the baselines and Monoloco
+# # 03 · Pedestrians: training DRF, the baselines and Monoloco
 #
 # The second experiment estimates the depth z of pedestrians from their 17 COCO keypoints
 # (PifPaf on nuScenes images in the paper). Keypoints are back-projected with each image's own
@@ -36,7 +36,7 @@
 # %%
 from drfkit.book.runtime import start_notebook
 
-P, timer = start_notebook("02_nuscenes_training", globals())
+P, timer = start_notebook("03_nuscenes_training", globals())
 
 # %%
 import matplotlib.pyplot as plt
@@ -119,7 +119,7 @@ for pr, c in curves.items():
 # %% [markdown]
 # ## In-distribution accuracy (p = 0.01)
 # Depth MAE in metres on the test scenes, mean over seeds with a 95 % t-interval, per training
-# protocol. Out-of-distribution levels are the subject of notebook 03.
+# protocol. Out-of-distribution levels are the subject of notebook 04.
 
 # %%
 models = {pr: studies.trained_models(P, "pedestrians", protocol=pr) for pr in PROTOCOLS}
@@ -145,7 +145,7 @@ for pr in PROTOCOLS:
 # %% [markdown]
 # Beside the paper's in-distribution MAE (real nuScenes and PifPaf). With the simulated source the
 # absolute values measure our stand-in detector, not PifPaf on nuScenes; what carries over is the
-# ranking of the models, which notebook 03 tests (C3, C4) under each protocol.
+# ranking of the models, which notebook 04 tests (C3, C4) under each protocol.
 
 # %%
 # NBVAL_IGNORE_OUTPUT

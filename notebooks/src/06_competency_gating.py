@@ -1,5 +1,5 @@
 # %% [markdown]
-# # 05 · Kalman-gain competency gating
+# # 06 · Kalman-gain competency gating
 #
 # The paper's discussion proposes the Kalman gain as a measure of the network's competency:
 # compute the expensive epistemic uncertainty (MC dropout) only on frames where competency is
@@ -56,7 +56,7 @@
 # %%
 from drfkit.book.runtime import start_notebook
 
-P, timer = start_notebook("05_competency_gating", globals())
+P, timer = start_notebook("06_competency_gating", globals())
 
 # %%
 import matplotlib.pyplot as plt
@@ -74,7 +74,7 @@ from drfkit.book.measurements import cached
 from drfkit.util.paths import results_dir
 from drfkit.report.writers import save_figure, save_table
 
-STUDIES = tuple(P.evaluation.studies)  # both by default; see notebook 03
+STUDIES = tuple(P.evaluation.studies)  # both by default; see notebook 04
 PROTOCOLS = {s: registry.study(s).protocols(P) for s in STUDIES}  # study -> training protocols
 GROUPS = [(s, protocol) for s in STUDIES for protocol in PROTOCOLS[s]]  # (study, protocol)
 # Times need a fixed thread count: `threads`, or 1 when it is 0 (torch's default uses every core,

@@ -1,0 +1,355 @@
+# %% [markdown]
+# # 02 · Pendulum: the dynamics study — does the filter filter?
+#
+# Notebook 01 trains the paper's three models and measures their accuracy and uncertainty. A verdict
+# on the DRF is only worth something if the model under test does what the method is about, so this
+# chapter looks inside it before notebook 04 judges the paper's claims: whether the Kalman machinery
+# filters (the gain follows frame quality, the learned transition predicts, the state coasts when
+# frames hold nothing), how far every model stays from a filter that knows the true physics, which
+# training protocol makes the DRF filter (an ablation in two rounds, on validation data only), where
+# in the noise regime a learned filter helps, and both protocols side by side on the test sets.
+# Claims F1 and F2 (the method's premise) are judged here. Everything reads notebook 01's checkpoints
+# (and trains what is missing).
+
+# %% tags=["parameters"]
+
+# %%
+from drfkit.book.runtime import start_notebook
+
+P, timer = start_notebook("02_pendulum_dynamics", globals())
+
+# %%
+import matplotlib.pyplot as plt
+import pandas as pd
+
+from drfkit.book.measurements import cached
+from drfkit.methods.train import load_checkpoint
+from drfkit.report.figures import plot_mae_bars
+from drfkit.report.writers import save_figure, save_table
+from drfkit.study import studies
+from drfkit.study.evaluate import evaluate_study, summarise
+from drfkit.study.paper import PENDULUM_MAE
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+# the paper protocol's selected checkpoints (notebook 01 trained them) and their test-set evaluation,
+# read from the prediction cache notebook 01 filled
+results = studies.train_models(P, "pendulum", progress=False)
+evals = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise)
+summary = summarise(evals, ["model", "noise"])
+print(f"{len(results)} runs: {sorted({k for k, _ in results})} x seeds {P.seeds}")
+
+# %% [markdown]
+# ## Does the filter filter?
+# A verdict on the DRF is only worth something if its Kalman machinery does what the method is
+# about. Four checks (`drfkit.methods.diagnostics`, deterministic pass, test split at the largest evaluated
+# noise and the blackout test set, where frames 30–44 of every sequence are pure noise):
+#
+# * `r_noise_spearman` — rank correlation of the observation variance r (mean over observed latent
+#   dims) with the frame's true noise level: the gain can only fall on bad frames if r rises;
+# * `gain_clean`, `gain_pure_blackout` — mean diagonal of K on clean frames and on the blackout's
+#   pure-noise frames (`gain_ratio_blackout` = pure / clean; a filter should trust noise far less);
+# * `prior_ratio` — ‖F_t z_{t-1} − w_t‖ / ‖z_{t-1} − w_t‖ on clean frames: below 1 the learned
+#   transition predicts the next observation better than "no change";
+# * `spectral_radius_median` of F_t — near 1 for a pendulum's slowly rotating state.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.study import dynamics
+
+models = {key: load_checkpoint(res.best_path) for key, res in results.items()}
+level = max(P.pendulum.eval_max_noise)
+mechanism = cached(P.profile, dynamics.mechanism_table, P, models, level, timing=False)
+save_table(P.profile, "pendulum_mechanism", mechanism)
+mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"]).round(3).T
+
+# %% [markdown]
+# In the paper profile (the paper's protocol, 3 seeds) the DRF's filter is inert: r moves with the
+# frame's noise, but far too little to change the gain, which on pure-noise frames is about what it is
+# on clean frames; F_t has a spectral radius above 2 and predicts the next observation worse than "no
+# change". The
+# memory of the paper's DRF sits in the LSTM cells of its transition network, whose hidden state F_t
+# is computed from; nothing in the loss asks F to describe how the state moves.
+
+# %% [markdown]
+# ## The limit: a filter that knows the physics
+# **These references use knowledge no learned model has.** The *true-physics bound* is a causal
+# particle filter with the generator's own equations (`drfkit.methods.oracle`: θ'' = −c sin θ − 0.1 θ',
+# velocity noise N(0, 0.1²) per frame, start at rest), fed each no_dynamics seed's per-frame
+# estimates of (cos θ, sin θ) and their σ; the σ scale and an outlier weight are chosen on the
+# validation split at the training noise only. It is what a filter could reach from the same
+# encoder, so it moves with the encoder: each protocol's bound is computed on its own no_dynamics
+# (below, and in "Both protocols side by side"). The *pixel reference* matches every frame against
+# the renderer's own images at 4096 angles (normalised correlation): what a single frame holds,
+# without dynamics, from clean frames to the benchmark's max noise 1.0.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+no_dyn = {seed: m for (kind, seed), m in models.items() if kind == "no_dynamics"}
+bound, bound_curves = cached(P.profile, dynamics.physics_bound, P, no_dyn, P.pendulum.eval_max_noise,
+                             n_particles=P.dynamics.bound_particles, timing=False)
+pixels = dynamics.pixel_reference(P, sorted({0.0, *P.pendulum.eval_max_noise, 1.0}))  # clean to the benchmark's max
+save_table(P.profile, "pendulum_physics_bound", bound)
+save_table(P.profile, "pendulum_pixel_reference", pixels)
+bound_mae = bound.groupby("noise", sort=False)[["mae_input", "mae"]].mean()
+bound_mae.join(pixels.set_index("noise")["mae"].rename("pixels_per_frame"), how="left").round(4)
+
+# %%
+assert (bound["mae"] > 0).all() and bound["noise"].astype(str).eq("blackout").any()
+levels_bound = {float(k): v for k, v in bound_mae["mae"].items() if k != "blackout"}
+fig = plot_mae_bars(summary, P.pendulum.models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise",
+                    bound=levels_bound)
+save_figure(P.profile, "pendulum_mae_with_bound", fig)
+plt.show()
+
+# %% [markdown]
+# ### Could any filter reach the paper's DRF from an encoder like the paper's no_dynamics?
+# The paper's no_dynamics has an MAE of 0.0465 at max noise 0.5 and 0.1003 at 0.75; its DRF 0.0046
+# and 0.0427 with, by the method, the same kind of encoder. The most favourable case for a filter:
+# per-frame estimates equal to the truth plus independent Gaussian errors of constant, known size,
+# scaled to the paper's no_dynamics MAE, filtered with the exact physics and the exact error model
+# (`dynamics.encoder_accuracy_check`). A real encoder is worse than this (its errors grow on noisy
+# frames and carry nothing on pure-noise ones), so the filtered MAE is a lower bound.
+
+# %%
+paper_check = cached(P.profile, dynamics.encoder_accuracy_check,
+                     studies.pendulum_split(P, "val")["targets"][: min(P.pendulum.val_sequences, 100)],
+                     {"paper no_dynamics @0.5": PENDULUM_MAE[0.5]["no_dynamics"],
+                      "paper no_dynamics @0.75": PENDULUM_MAE[0.75]["no_dynamics"]},
+                     n_particles=max(P.dynamics.bound_particles, 300), seed=P.seeds[0], timing=False)
+paper_check = paper_check.assign(paper_drf=[PENDULUM_MAE[0.5]["drf"], PENDULUM_MAE[0.75]["drf"]])
+save_table(P.profile, "pendulum_paper_encoder_check", paper_check)
+assert paper_check["filtered_mae"].lt(paper_check["encoder_mae"]).all()  # filtering the truth's physics helps
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+for _, r in paper_check.iterrows():
+    verdict = "cannot reach" if r["filtered_mae"] > r["paper_drf"] else "can reach"
+    print(f"{r['name']}: an ideal filter on such an encoder gets {r['filtered_mae']:.4f}; the paper's DRF "
+          f"reports {r['paper_drf']:.4f}: even the ideal filter {verdict} it")
+
+# %% [markdown]
+# At max noise 0.5 (paper profile, validation motions): the ideal filter on an encoder as accurate as
+# the paper's no_dynamics stays several times above the paper's DRF, so that DRF number cannot come
+# from filtering such observations; it needs a per-frame encoder several times better than the paper's
+# no_dynamics (a training difference, not a filtering one). At 0.75 the paper's DRF lies above what
+# filtering could give, so there the claim is physically possible.
+
+# %% [markdown]
+# ## Blackout: does the state coast?
+# MAE per frame (MC dropout mean) through the blackout: a filter that carries the motion forward
+# keeps a low error on the pure-noise frames and recovers at once after them; a model without a
+# state falls to guessing (predicting (0, 0) scores about 0.64).
+
+# %%
+from drfkit.data.pendulum import blackout_frames
+from drfkit.report.figures import plot_blackout
+
+curves_dark = pd.concat([dynamics.blackout_curves(P, models), bound_curves], ignore_index=True)
+save_table(P.profile, "pendulum_blackout_curves", curves_dark)
+dark_table = dynamics.blackout_table(curves_dark)
+save_table(P.profile, "pendulum_blackout", dark_table)
+fig = plot_blackout(curves_dark, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
+save_figure(P.profile, "pendulum_blackout", fig)
+plt.show()
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round(4)
+
+# %% [markdown]
+# ## Which protocol makes the DRF filter? An ablation on validation data
+# The paper leaves open much of how the DRF is trained. Each variant of `drfkit.methods.protocols`
+# changes one lever (or a combination) and is trained on a small budget (`ablation_budget`), then
+# judged on the **validation** split only — at the training noise, at 0.75 and 1.0, with a
+# blackout — with the same mechanism checks as above. The baselines are trained under the same
+# protocols, so a gain that any sequence model would get shows up in theirs too. Every variant
+# tried stays in the table. Rows are cached under `results/<profile>/ablation/`; the command
+# behind them: `python -m drfkit ablation --budget <ablation_budget> --out results/<profile>/ablation
+# --variants ... --seeds ...` (one thread per run; two such processes on two cores). This notebook
+# trains the rows `ablation_variants` × `ablation_seeds` that are missing and shows every finished row
+# of the budget (in the paper profile, the single levers were run at seed 0 by that command).
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.study import ablation
+from drfkit.util.paths import results_dir
+
+rows = [ablation.run_variant(v, s, P.dynamics.ablation.budget, results_dir(P.profile, "ablation"), progress=False)
+        for v in P.dynamics.ablation.variants for s in P.dynamics.ablation.seeds]
+table = ablation.ablation_table(P.dynamics.ablation.budget, results_dir(P.profile, "ablation"))  # every finished row
+save_table(P.profile, "pendulum_ablation", table)
+ablation.summarise_ablation(table)
+
+# %%
+required = {(v, s) for v in P.dynamics.ablation.variants for s in P.dynamics.ablation.seeds}
+assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"].gt(0).all()
+
+# %% [markdown]
+# What the paper profile's first round shows. Its four key rows (`paper`, `book` and the baselines
+# trained the book's way, two seeds each) were rerun on the benchmark's frames; the single levers
+# (column `current` False) were measured on the book's former OpenCV frames and are kept as the
+# record of what was tried, not rerun. Without training blackouts the paper's DRF does not coast: its
+# gain on pure noise stays near its clean-frame gain and F is unstable (spectral radius well above 1),
+# so whatever memory it has sits in the transition LSTM. With blackouts *and* a memory-free
+# transition (`book`) the DRF coasts through its filter: the gain falls on pure noise, r rises with
+# the noise, and its blackout error is several times below the LSTM's and no_dynamics' trained the
+# same way. Still short of a full filter at this budget: r follows the noise only loosely and F does
+# not beat "no change" on clean frames. That `book` variant was the book's protocol until the second
+# round below replaced it.
+
+# %% [markdown]
+# ## How the models are fit: the ablation's second round
+# Round one changed what the models *are*; every variant was still fit with the paper's Gaussian NLL
+# on one fixed draw of the training noise. Under that loss the training NLL keeps falling while the
+# validation MAE of the mean doubles, clean frames included: the network learns a small σ where
+# frames are easy and then barely fits the mean elsewhere (the gradient in μ is (μ − y)/σ²). The
+# second round changes how the models are *fit* (`drfkit.methods.objectives`, `drfkit.methods.train.TrainConfig`):
+# β-NLL with β = 1 (the mean gets the gradient of ½(y − μ)², σ still learns the spread), the
+# training noise redrawn on the fixed clean frames every epoch, cosine decay of the learning rate,
+# random 25-frame windows, the checkpoint selected on the validation MAE; each `fit_*` variant
+# varies one lever of that recipe (the plain NLL, an MSE warm-up, training blackouts, the benchmark's
+# native noise with its pure-noise frames) for the DRF, the LSTM and no_dynamics alike, together with
+# three filter levers: a split decoder (the mean from z alone, σ from P alone, as the RKN's), a loss on
+# the one-step prior z_{t|t−1} as well as the posterior (so the transition must predict), and a
+# constant learned Q. Data: the benchmark's own frames, validation split only. Rows are cached under
+# `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit ablation --budget
+# fit --out results/<profile>/ablation --variants ... --seeds 0 1 --threads 1`.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+round2_rows = [ablation.run_variant(v, s, P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"), progress=False)
+               for v in P.dynamics.ablation.round2.variants for s in P.dynamics.ablation.round2.seeds]
+round2 = ablation.ablation_table(P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"))
+save_table(P.profile, "pendulum_ablation_round2", round2)
+round2_summary = ablation.summarise_ablation(round2)
+round2_summary
+
+# %%
+required = {(v, s) for v in P.dynamics.ablation.round2.variants for s in P.dynamics.ablation.round2.seeds}
+assert required <= set(zip(round2["variant"], round2["seed"])) and round2["mae_0.5"].gt(0).all()
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+print(ablation.round2_reading(round2_summary))
+
+# %% [markdown]
+# **The book's protocol is chosen by a rule stated before reading the result**: of the DRF variants
+# trained at the paper's max noise 0.5 with at least two seeds, the one that meets the most of the
+# filter's targets (the thresholds of claims F1 and F2: r follows the noise, the gain drops on pure
+# noise, F z predicts better than z, the state coasts through the blackout), ties broken by the MAE
+# at 0.75 (`ablation.mechanism_targets`). A DRF whose filter does not filter would answer a different
+# question than the paper's; accuracy alone would pick the paper's configuration, which stays the
+# paper protocol's. `tests/test_protocols.py` checks that `PROTOCOLS['book']` is this table's first
+# row on the committed rows.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.dynamics.ablation.round2.seeds)))
+
+# %% [markdown]
+# ## The noise-regime map: where does a learned filter help?
+# The paper trains at max noise 0.5 and calls 0.75 out of distribution. How the benefit of a
+# recursive filter depends on the noise regime is a separate question: the book's protocol of each
+# model (`drfkit.methods.protocols.regime_variant`) is trained at every `regime_train_noise` on the ablation's
+# budget, and evaluated on a **test split of its own** (a seed no training or selection reads) along
+# the whole sweep of max noise and on the blackout set, beside the true-physics bound on that
+# training noise's no_dynamics (calibrated on validation at its training noise). Small budget, so the
+# numbers compare regimes, not the paper-scale runs above. Rows are cached under
+# `results/<profile>/ablation/<budget>/regime/`; `python -m drfkit regime --profile <profile>`
+# trains and evaluates what is missing.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.book.regime_map import write_outputs
+from drfkit.study import regime
+
+regimes = regime.profile_map(P)
+regime_table = write_outputs(P, regimes)  # tables and the figure, as `python -m drfkit regime` writes them
+plt.show()
+regime_table.round(4)
+
+# %%
+assert set(regimes["train_noise"]) == set(P.dynamics.regime.train_noise) and regimes["mae"].gt(0).all()
+assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
+
+# %% [markdown]
+# `drf_over_no_dynamics` below 1 is where the recursive filter helps the same encoder; `drf_over_bound`
+# is how far it stays from a filter that knows the physics. Read along a row of panels: training at a
+# higher noise moves the region where every model is accurate to the right (0.75 is no longer out of
+# distribution for a model trained at 1.0), and the blackout column shows which models carry the
+# state through frames that hold nothing.
+
+# %% [markdown]
+# ## Both protocols side by side
+# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the second round's
+# choice for the DRF, the same recipe and training data for the LSTM and no_dynamics, each on the
+# book's schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
+# the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
+# here; `python -m drfkit train --profile paper --study pendulum --protocol book --threads 1`
+# trains (or resumes) its runs.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+pieces = {"paper": (evals, mechanism, dark_table)}
+dark_curves = {"paper": curves_dark[curves_dark["model"] != "physics_bound"]}
+bounds = {"paper": bound}
+for protocol in P.pendulum.protocols:
+    if protocol != "paper":
+        trained = studies.trained_models(P, "pendulum", progress=True, protocol=protocol)
+        dark_curves[protocol] = dynamics.blackout_curves(P, trained)
+        pieces[protocol] = (evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, models=trained),
+                            cached(P.profile, dynamics.mechanism_table, P, trained, level, timing=False),
+                            dynamics.blackout_table(dark_curves[protocol]))
+        bounds[protocol] = cached(P.profile, dynamics.physics_bound, P,
+                                  {seed: m for (kind, seed), m in trained.items() if kind == "no_dynamics"},
+                                  P.pendulum.eval_max_noise, n_particles=P.dynamics.bound_particles, timing=False)[0]
+protocols = pd.concat([dynamics.protocol_table(name, *parts) for name, parts in pieces.items()], ignore_index=True)
+save_table(P.profile, "pendulum_protocols", protocols)
+protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).drop(columns="seed").round(4)
+
+# %% [markdown]
+# Each protocol's true-physics bound, on its own no_dynamics (seed means; the blackout's over the
+# blackout frames, as the models'), and the DRF's MAE over it: how far the learned filter stays from
+# what filtering the same encoder with the exact physics would give.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+bounds_table = pd.concat([b.assign(protocol=name) for name, b in bounds.items()], ignore_index=True)
+save_table(P.profile, "pendulum_physics_bound_protocols", bounds_table)
+drf_mae = protocols[protocols["model"] == "drf"].groupby("protocol", sort=False).mean(numeric_only=True)
+bound_means = bounds_table.groupby(["protocol", "noise"], sort=False)["mae"].mean().unstack("noise")
+pd.DataFrame({f"drf / bound at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" else "mae_blackout"] / bound_means[c]
+              for c in bound_means.columns}).round(2)
+
+# %% [markdown]
+# The blackout under each protocol, beside the same true-physics bound: where a model's curve stays
+# low through the grey frames, it carries the state forward; where it jumps to about 0.6, it guesses.
+
+# %%
+by_protocol = pd.concat([c.assign(protocol=name) for name, c in dark_curves.items()]
+                        + [bound_curves.assign(protocol=None)], ignore_index=True)
+fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
+save_figure(P.profile, "pendulum_blackout_protocols", fig)
+plt.show()
+
+# %% [markdown]
+# Two rows of the claims table (`results/<profile>/claims.md`) state the method's premise for each
+# protocol, with computed verdicts: **F1**, the filter filters (rank correlation of r with the noise
+# ≥ 0.8, gain on pure noise ≤ ¼ of that on clean frames, F z predicts better than z), and **F2**, its
+# state coasts (blackout MAE ≤ 0.10; the bound on the same protocol's no_dynamics is given beside it).
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.study import claims
+
+for protocol, (_, mech, dark) in pieces.items():
+    own_bound = bounds[protocol].groupby("noise", sort=False)["mae"].mean()  # this protocol's no_dynamics
+    _ = claims.upsert(P.profile, [claims.f1_filter_mechanism(mech, level),
+                                  claims.f2_blackout_coasting(dark, float(own_bound["blackout"]))],
+                      protocol=protocol)
+print(pd.read_csv(results_dir(P.profile) / "claims.csv").query("id in ['F1', 'F2']")[["id", "protocol", "verdict"]]
+      .to_string(index=False))
+
+# %%
+_ = timer.finish()
