@@ -101,7 +101,7 @@ SCHEMA = Section("", {
                          "stop a run after this many epochs without a better validation NLL"),
         "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
                           lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebooks 01 and 02 train and evaluates (drfkit.methods.protocols)"),
+                          "the training protocols notebooks 01 and 02 train and evaluate (drfkit.methods.protocols)"),
         "book": Section("book_", {
             "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
             "batch_size": Spec(int, *_POSITIVE),
