@@ -94,6 +94,15 @@ def test_ablation_row_is_trained_once_and_reused(tmp_path):
     summary = summarise_ablation(table)
     assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
     assert ablation.main(["--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
+    assert table["current"].all() and summary["current"].all()
+    # a row the present code would train differently (older frames, another schedule) is kept but marked
+    stale = tmp_path / "tiny" / "no_dynamics_book-seed0.json"
+    stale.write_text(json.dumps(json.loads(stale.read_text()) | {"key": "former"}))
+    table = ablation.ablation_table("tiny", tmp_path).set_index("variant")
+    assert bool(table.loc["book", "current"]) and not bool(table.loc["no_dynamics_book", "current"])
+    retired = tmp_path / "tiny" / "retired_variant-seed0.json"
+    retired.write_text(json.dumps(json.loads(path.read_text()) | {"variant": "retired_variant"}))
+    assert not bool(ablation.ablation_table("tiny", tmp_path).set_index("variant").loc["retired_variant", "current"])
 
 
 def test_ablation_cli_rejects_unknown_variants(capsys):
