@@ -25,8 +25,9 @@ def _pipeline(profile, env, *extra):
 
 
 def test_a_second_pipeline_is_refused_and_a_killed_one_is_undone_on_the_next_start(tmp_path, monkeypatch):
-    # more training sequences than the quick profile: the data prep runs long enough to be caught
-    values = load_profile("quick") | {"profile": "locked", "pend_train_sequences": 1500}
+    # many more training sequences than the quick profile: the data prep (frames gathered from the rod bank,
+    # fast) runs long enough to be caught
+    values = load_profile("quick") | {"profile": "locked", "pend_train_sequences": 12000}
     profile = tmp_path / "locked.yaml"
     write_profile(profile, values)
     root = tmp_path / "results" / "locked"
