@@ -14,7 +14,7 @@ STAMP := $(VENV)/.drfkit-installed
 BOOK_STAMP := $(VENV)/.book-installed
 NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbval-cell-timeout 1200
 
-.PHONY: reproduce quick test unit nbval bench notebooks book book-check clean help
+.PHONY: reproduce quick test unit nbval bench notebooks book book-tools book-check clean help
 
 help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
@@ -26,6 +26,7 @@ help:
 	@echo "make notebooks                        rebuild notebooks/*.ipynb from notebooks/src/ and store outputs"
 	@echo "make book [PROFILE=paper|quick]       the executed notebooks as an HTML book in results/\$$PROFILE/book/"
 	@echo "make book-check                       open that book in headless chromium and check it (apt-get install chromium)"
+	@echo "make book-tools                       only install the book's tools (then make test also builds small books)"
 	@echo "make clean                            remove what runs produce (keeps results/paper/)"
 
 $(STAMP): environment.txt pyproject.toml
@@ -59,6 +60,8 @@ notebooks: $(STAMP)
 $(BOOK_STAMP): requirements-book.txt $(STAMP)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements-book.txt -c environment.txt
 	@touch $@
+
+book-tools: $(BOOK_STAMP)
 
 # nothing is executed: results/$(PROFILE)/ as a run left it, rendered by Sphinx (tools/build_book.py)
 book: $(BOOK_STAMP)

@@ -17,6 +17,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "manifest": ("drfkit.book.manifest", "rebuild cell_times.csv from a profile's executed notebooks"),
     "regime": ("drfkit.book.regime_map", "the noise-regime map: train, evaluate, write its tables and figure"),
     "report": ("drfkit.report.writers", "regenerate the README's results section and report.md"),
+    "claims": ("drfkit.study.claims.judge", "judge every claim again from a profile's tables (claims.csv, claims.md)"),
     "ablation": ("drfkit.study.ablation", "the protocol ablation on validation data"),
     "dynamics": ("drfkit.study.dynamics", "is the filter filtering: a run's mechanism diagnostics"),
     "bench": ("drfkit.study.bench", "the inference benchmark (make bench), results/<profile>/timing.csv"),

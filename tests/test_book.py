@@ -102,6 +102,9 @@ def test_readme_landing_keeps_user_sections_and_links_claims():
     assert "| [C1](claims.md#claim-c1) | one |" in page and "| [C7a](claims.md#claim-c7a) | two |" in page
     other = booklib.readme_landing(README, "quick", ["C1"])
     assert "| C1 |" not in other and "results/quick/report.md" in other
+    assert "(results/quick/report.md)" not in booklib.readme_landing(README, "quick", ["C1"], report=False)
+    # the README's link to claims.md opens the book's claims page (the same rows, anchored)
+    assert booklib.readme_landing("[c](results/paper/claims.md)\n", "paper", ["C1"]) == "[c](claims.md)\n"
     assert booklib.rewrite_doc_links("see [t](docs/training_speed.md)") == "see [t](training_speed.md)"
     assert booklib.appendix_order(["zeta", "trust", "choices"]) == ["choices", "trust", "zeta"]
 

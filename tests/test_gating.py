@@ -275,10 +275,12 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
     assert by.loc["random", "n_selected"] == by.loc["kalman_gain", "n_selected"]
     assert table["picp"].between(0, 1).all() and (table["head_ms"] > 0).all() and (table["whole_ms"] > 0).all()
     np.testing.assert_allclose(table["time_ms"], table["features_ms"] + table["head_ms"])
-    assert sweep["whole_ms"].isna().all() and (sweep["time_ms"] > 0).all()
+    timed = sweep[sweep["method"] != "oracle"]
+    assert sweep["whole_ms"].isna().all() and (timed["time_ms"] > 0).all()
+    assert sweep.loc[sweep["method"] == "oracle", "time_ms"].isna().all()  # reads the targets: compared, never timed
     assert (table["frames"] == int(test.mask.sum())).all()
-    assert len(sweep) == 8 and set(sweep["method"]) == {"kalman_gain", "random"}
-    for method in ("kalman_gain", "random"):
+    assert len(sweep) == 12 and set(sweep["method"]) == {"kalman_gain", "random", "oracle"}
+    for method in ("kalman_gain", "random", "oracle"):
         rows = sweep[sweep["method"] == method].sort_values("val_fraction")
         assert rows["fraction"].iloc[0] == 0 and rows["fraction"].iloc[-1] == 1
         # never = no dropout, always = always (same seed for the masks)
@@ -287,7 +289,20 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
                 assert rows[metric].iloc[end] == by.loc[setting, metric]  # assembled from the same two passes
     kg = sweep[sweep["method"] == "kalman_gain"].set_index("val_fraction")["fraction"]
     rnd = sweep[sweep["method"] == "random"].set_index("val_fraction")["fraction"]
-    assert (kg == rnd).all()
+    oracle = sweep[sweep["method"] == "oracle"].set_index("val_fraction")
+    assert (kg == rnd).all() and (oracle["fraction"] == kg).all()
+
+
+def test_oracle_selection_takes_the_largest_errors_among_real_frames():
+    error = torch.tensor([[0.1, 0.9, 0.5], [0.7, 0.2, 0.95]])
+    mask = torch.tensor([[True, True, True], [True, True, False]])
+    sel = gating.oracle_selection(error, mask, 2)
+    assert sel.tolist() == [[False, True, False], [True, False, False]]  # 0.95 is padding, never chosen
+    assert not gating.oracle_selection(error, mask, 0).any()
+    assert gating.oracle_selection(error, mask, 5).tolist() == mask.tolist()
+    for bad in (6, -1, 1.5):
+        with pytest.raises(ValueError, match="n_selected"):
+            gating.oracle_selection(error, mask, bad)
 
 
 def test_timing_subset_is_evenly_spaced_fixed_and_checked():
@@ -348,6 +363,9 @@ def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(m
                     for thr in timed_kg}
     timed_random = {n for b, s, _, n, _ in stage_calls[n_full_stage:] if s == "random"}
     assert timed_random == timed_counts
+    timed = ~sub["setting"].str.startswith("oracle")  # the oracle twins read the targets: metrics only
+    assert sub.loc[~timed, "time_ms"].isna().all() and timed.sum() == len(sub) - len(thresholds)
+    sub = sub[timed]
     assert (sub["time_ms"] > 0).all() and np.allclose(sub["batch_ms"], sub["time_ms"] * sub["timed_frames"])
 
 

@@ -65,3 +65,71 @@ def test_cell_times_name_cells_by_code_and_replace_a_notebooks_rows(tmp_path, mo
     (tmp_path / "bad.ipynb").write_text("{}")
     record_cell_times("p", "03_c", tmp_path / "bad.ipynb")  # unreadable: no rows, no error
     assert set(pd.read_csv(tmp_path / "p" / "cell_times.csv")["notebook"]) == {"01_a", "02_b"}
+
+
+def test_a_run_s_outputs_do_not_make_a_clean_tree_dirty_but_code_does(tmp_path, monkeypatch):
+    """manifest.json's git.dirty: results/ (and $DRF_RESULTS inside the repository) are the run's
+    own outputs; a changed or new file anywhere else is a change to the code."""
+    import subprocess
+
+    from drfkit.book.manifest import git_commit
+
+    repo = tmp_path / "repo"
+    (repo / "drfkit").mkdir(parents=True)
+    (repo / "results" / "paper").mkdir(parents=True)
+    (repo / "drfkit" / "a.py").write_text("x = 1\n")
+    (repo / "results" / "paper" / "claims.csv").write_text("id\nC1\n")
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=repo, check=True,
+                       capture_output=True)
+
+    git("init", "-q")
+    git("add", ".")
+    git("commit", "-q", "-m", "one")
+    monkeypatch.setenv("DRF_RESULTS", str(repo / "elsewhere"))
+    assert git_commit(repo) == {"commit": git_commit(repo)["commit"], "dirty": False}
+    assert len(git_commit(repo)["commit"]) == 40
+    # a run rewrites a committed result and adds new ones: still clean
+    (repo / "results" / "paper" / "claims.csv").write_text("id\nC2\n")
+    (repo / "results" / "quick" / "tables").mkdir(parents=True)
+    (repo / "results" / "quick" / "tables" / "t.csv").write_text("a\n1\n")
+    (repo / "elsewhere" / "p").mkdir(parents=True)
+    (repo / "elsewhere" / "p" / "manifest.json").write_text("{}")
+    assert git_commit(repo)["dirty"] is False
+    # code changed, or new code: dirty
+    (repo / "drfkit" / "a.py").write_text("x = 2\n")
+    assert git_commit(repo)["dirty"] is True
+    git("checkout", "-q", "--", "drfkit/a.py")
+    assert git_commit(repo)["dirty"] is False
+    (repo / "drfkit" / "b.py").write_text("y = 1\n")
+    assert git_commit(repo)["dirty"] is True
+
+
+def test_cell_times_describe_the_last_run_only(tmp_path, monkeypatch):
+    """Rows of a notebook that is not in the run (one since renamed) are dropped, by the pipeline's
+    record and by `python -m drfkit manifest --cell-times`, which rebuilds the file."""
+    import nbformat
+    import pandas as pd
+
+    from drfkit.book.manifest import main, record_cell_times, update_manifest
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    nb = nbformat.v4.new_notebook()
+    nb.cells = [nbformat.v4.new_code_cell("x = 1")]
+    nb.cells[0].metadata["papermill"] = {"duration": 2.0}
+    executed = tmp_path / "p" / "executed"
+    executed.mkdir(parents=True)
+    for name in ("00_data_prep", "01_pendulum_training", "02_nuscenes_training"):  # the last: a former name
+        nbformat.write(nb, executed / f"{name}.ipynb")
+    for name in ("02_nuscenes_training", "00_data_prep"):
+        record_cell_times("p", name, executed / f"{name}.ipynb")  # as a run under the former names left it
+    path = tmp_path / "p" / "cell_times.csv"
+    run = ["00_data_prep", "01_pendulum_training"]
+    record_cell_times("p", "01_pendulum_training", executed / "01_pendulum_training.ipynb", run=run)
+    assert sorted(set(pd.read_csv(path)["notebook"])) == run
+    pd.DataFrame([{"notebook": "04_timing", "cell": 0, "seconds": 1.0, "first_line": "x"}]).to_csv(path, index=False)
+    update_manifest("p", pipeline={"notebooks": run})
+    assert main(["--cell-times", "p"]) == 0
+    table = pd.read_csv(path)
+    assert sorted(set(table["notebook"])) == run and table["seconds"].tolist() == [2.0, 2.0]

@@ -51,3 +51,32 @@ def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]
     assert not (tmp_path / "results" / "quick" / "executed").exists()
+
+
+def test_the_pipeline_s_kernels_run_over_ipc_and_print_no_tcp_warning(tmp_path, capfd):
+    """drfkit.book.pipeline.ipc_kernels: the kernel papermill starts listens on Unix sockets in a
+    private folder, not on TCP ports, so ipykernel has no 'running over TCP without encryption'
+    warning to print into the terminal of `make reproduce`."""
+    import os
+
+    import nbformat
+    import papermill as pm
+
+    from drfkit.book.pipeline import ipc_kernels
+
+    nb = nbformat.v4.new_notebook(metadata={"kernelspec": {"name": "python3", "display_name": "Python 3",
+                                                           "language": "python"}})
+    nb.cells = [nbformat.v4.new_code_cell(
+        "import json, ipykernel.connect\n"
+        "info = json.load(open(ipykernel.connect.get_connection_file()))\n"
+        "print(info['transport'], info['ip'])")]
+    nbformat.write(nb, tmp_path / "in.ipynb")
+    with ipc_kernels() as config:
+        folder = os.path.dirname(config.KernelManager.ip)
+        assert oct(os.stat(folder).st_mode & 0o777) == "0o700"
+        pm.execute_notebook(str(tmp_path / "in.ipynb"), str(tmp_path / "out.ipynb"), progress_bar=False,
+                            kernel_name="python3", cwd=str(tmp_path), config=config)
+    transport, ip = nbformat.read(tmp_path / "out.ipynb", as_version=4).cells[0].outputs[0]["text"].split()
+    assert transport == "ipc" and ip == config.KernelManager.ip
+    assert not os.path.exists(folder)  # the sockets' folder is gone with the run
+    assert "without encryption" not in capfd.readouterr().err

@@ -25,7 +25,8 @@ def quick(tmp_path, monkeypatch, **over):
 
 def test_every_protocol_names_a_variant_per_model():
     for protocol, kinds in PROTOCOLS.items():
-        assert set(kinds) == {"drf", "no_dynamics", "lstm"}
+        # the book's protocol adds the known-dynamics filter, the model-based reference
+        assert set(kinds) == {"drf", "no_dynamics", "lstm"} | ({"known_dynamics"} if protocol == "book" else set())
         for kind, variant in kinds.items():
             assert VARIANTS[variant]["kind"] == kind
     assert protocol_spec("paper", "drf") == {"kind": "drf", "model": {}, "blackouts": None, "train_max_noise": 0.5,

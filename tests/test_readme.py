@@ -46,3 +46,11 @@ def test_readme_filter_example_beats_no_update_and_the_raw_observations(monkeypa
     assert (filtered < 0.8 * _run_with_step(no_update, monkeypatch)).all()
     assert (filtered < 0.8 * _run_with_step(observation_only, monkeypatch)).all()
     capsys.readouterr()
+
+
+def test_readme_is_a_user_s_document_of_at_most_15_kb():
+    """The README is what a user reads first; the library's layers live in docs/library.md, each
+    claim's evidence in results/<profile>/claims.md (the generated section links it once)."""
+    size = len((REPO_ROOT / "README.md").read_bytes())
+    assert size <= 15_000, (f"README.md is {size} bytes: move reference material to docs/ or to the "
+                            f"notebook that measures it")

@@ -125,13 +125,13 @@ def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path)
     text = "\n".join(dynamics_lines(tmp_path))
     assert "| paper | DRF (ours) | 0.0200 | 0.5500 | 0.05 | 0.92 | 7.90 |" in text
     assert "| book | DRF (ours) | 0.0100 | 0.0800 | 0.90 | 0.20 | 0.70 |" in text
-    assert "| — | true-physics bound on its no_dynamics | 0.0060 | 0.0330 |" in text
+    assert "| — | true-physics reference on its no_dynamics | 0.0060 | 0.0330 |" in text
     # each protocol's bound on its own no_dynamics, once notebook 02 has written them (like for like)
     pd.DataFrame({"protocol": ["paper", "paper", "book", "book"], "seed": [0] * 4, "noise": ["0.5", "blackout"] * 2,
                   "mae": [0.006, 0.033, 0.004, 0.021]}).to_csv(tmp_path / "pendulum_physics_bound_protocols.csv", index=False)
     text = "\n".join(dynamics_lines(tmp_path))
-    assert "| paper | true-physics bound on its no_dynamics | 0.0060 | 0.0330 |" in text
-    assert "| book | true-physics bound on its no_dynamics | 0.0040 | 0.0210 |" in text and "| — |" not in text
+    assert "| paper | true-physics reference on its no_dynamics | 0.0060 | 0.0330 |" in text
+    assert "| book | true-physics reference on its no_dynamics | 0.0040 | 0.0210 |" in text and "| — |" not in text
     pd.DataFrame({"variant": ["book", "book", "paper"], "kind": ["drf"] * 3, "seed": [0, 1, 0], "budget": ["small"] * 3,
                   "mae_0.5": [0.01, 0.03, 0.02], "mae_blackout": [0.1, 0.2, 0.5]}).to_csv(tmp_path / "pendulum_ablation.csv",
                                                                                        index=False)
@@ -161,15 +161,34 @@ def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tm
     pd.DataFrame([{"id": i, "protocol": p, "claim": f"claim {i}", "paper": "1 | 2", "ours": "x", "verdict": v,
                    "rule": "r"} for i, p, v in rows]).to_csv(tmp_path / "claims.csv", index=False)
     lines = claims_summary_table(tmp_path / "claims.csv")
-    assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol | judged in |"
-    assert lines[2].startswith("| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** | [04_ood_noise_evaluation")
-    assert lines[3].startswith("| C4 | claim C4 | 1 / 2 | **reproduced** (simulated source) | — | ")
-    assert "(tables/ood_all_metrics.csv)" in lines[3]  # every claim links its notebook, tables and figures
+    assert lines[0] == "| id | claim | paper | verdict, paper protocol | verdict, book protocol |"
+    assert lines[2] == "| C1 | claim C1 | 1 / 2 | **not reproduced** | **partly** |"
+    assert lines[3] == "| C4 | claim C4 | 1 / 2 | **reproduced** (simulated source) | — |"
     pd.DataFrame([{"id": "C4", "protocol": "paper", "claim": "c", "paper": "p", "ours": "x", "verdict": "partly",
                    "rule": "r"}]).to_csv(tmp_path / "claims.csv", index=False)
     table = claims_summary_table(tmp_path / "claims.csv")
-    assert table[:2] == ["| id | claim | paper | verdict | judged in |", "|---|---|---|---|---|"]
-    assert table[2].startswith("| C4 | c | p | **partly** (simulated source) | [04_ood_noise_evaluation")
+    assert table[:3] == ["| id | claim | paper | verdict |", "|---|---|---|---|", "| C4 | c | p | **partly** (simulated source) |"]
+
+
+def test_readme_section_links_claims_md_and_report_md_where_they_are(tmp_path, monkeypatch):
+    """The README's section names each claim once and links claims.md (evidence) and report.md; the
+    report's links are relative to its own folder, so both hold on GitHub and in the book."""
+    from drfkit.report.writers import readme_section, report_text
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    root = tmp_path / "p"
+    (root / "figures").mkdir(parents=True)
+    pd.DataFrame([{"id": "C1", "protocol": "paper", "claim": "c", "paper": "p", "ours": "x", "verdict": "partly",
+                   "rule": "r"}]).to_csv(root / "claims.csv", index=False)
+    (root / "claims.md").write_text("# Claims\n\nintro\n\n| id |\n|---|\n| [x](executed/01_a.ipynb) |\n")
+    (root / "figures" / "pendulum_mae.png").write_bytes(b"png")
+    (root / "figures" / "pedestrians_mae.png").write_bytes(b"png")
+    text = readme_section("p", "make reproduce PROFILE=p")
+    assert "[results/p/claims.md](results/p/claims.md)" in text and "(results/p/report.md)" in text
+    assert "![Pedestrian depth MAE" in text and "(results/p/figures/pedestrians_mae.png)" in text
+    assert "executed/" not in text and "pendulum_mae.png" not in text  # evidence stays in claims.md; README_FIGURES only
+    report = report_text("p", "make reproduce PROFILE=p")
+    assert "(figures/pendulum_mae.png)" in report and "(executed/01_a.ipynb)" in report and "../" not in report
 
 
 def test_every_claim_links_evidence_that_the_paper_profile_has():
@@ -210,3 +229,18 @@ def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
     assert len(single.axes) == 1 and single.axes[0].get_title() == ""
     unlabelled = plot_blackout(curves.assign(protocol=None), (3, 6), ["drf"])  # no protocol named: one panel
     assert len(unlabelled.axes) == 1
+
+
+def test_the_committed_readme_section_and_report_are_what_the_generator_writes():
+    """The README's results section and results/paper/report.md are generated, never edited: after a
+    change to the generator or to the committed results, `python -m drfkit report --profiles paper`
+    writes them again (a link or caption changed by hand, or left behind, fails here)."""
+    from drfkit.report.writers import README_END, README_START, readme_section, report_text
+    from drfkit.util.paths import REPO_ROOT
+
+    readme = (REPO_ROOT / "README.md").read_text()
+    block = readme.split(README_START, 1)[1].split(README_END, 1)[0]
+    assert block.strip() == readme_section("paper", "make reproduce").strip(), \
+        "README's results section is stale: run `python -m drfkit report --profiles paper`"
+    assert (REPO_ROOT / "results" / "paper" / "report.md").read_text() == report_text("paper", "make reproduce"), \
+        "results/paper/report.md is stale: run `python -m drfkit report --profiles paper`"

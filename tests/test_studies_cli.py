@@ -32,7 +32,15 @@ def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_pr
     results = studies.train_models(P, "pendulum", progress=False)
     assert set(results) == {(k, s) for k in P.pendulum.models for s in P.seeds}
     assert stem.with_name(stem.name + "-best.pt").stat().st_mtime_ns == mtime
-    assert (tmp_path / "results" / "tiny" / "tables" / "pendulum_training_curves.csv").exists()
+    curves = tmp_path / "results" / "tiny" / "tables" / "pendulum_training_curves.csv"
+    assert curves.exists()
+    # one writer per table: a notebook that uses the runs another trains writes no curves
+    curves.unlink()
+    assert set(studies.trained_models(P, "pendulum")) == set(results)
+    studies.train_models(P, "pendulum", progress=False, write_curves=False)
+    assert not curves.exists()
+    studies.trained_models(P, "pendulum", write_curves=True)  # the notebook that trains them
+    assert curves.exists()
 
 
 @pytest.mark.parametrize("args, message", [
@@ -157,7 +165,7 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     from drfkit.methods import protocols
 
     monkeypatch.setitem(protocols.PROTOCOLS, "book", {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout",
-                                                      "lstm": "fit_lstm_blackout"})
+                                                      "lstm": "fit_lstm_blackout", "known_dynamics": "fit_known_dynamics"})
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
     cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
     assert (cfg.objective, cfg.beta, cfg.lr_schedule, cfg.window, cfg.select_on, cfg.prior_weight) == \

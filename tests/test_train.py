@@ -337,7 +337,8 @@ def test_later_fields_at_their_defaults_leave_names_and_fingerprints_as_before()
     from drfkit.methods.train import fingerprint, naming_fields
 
     cfg = train_cfg()
-    later = ("select_on", "objective", "beta", "mse_warmup", "lr_schedule", "weight_decay", "window", "prior_weight")
+    later = ("select_on", "objective", "beta", "mse_warmup", "lr_schedule", "weight_decay", "window", "prior_weight",
+             "obs_weight")
     before = {k: v for k, v in vars(cfg).items() if k not in later}  # a run made before these fields existed
     assert naming_fields(cfg) == {k: v for k, v in before.items() if k != "patience"}
     assert fingerprint({}, cfg, "d") == param_hash({"model": {}, "train": {k: v for k, v in before.items()
@@ -355,3 +356,20 @@ def test_no_gradient_clipping_when_grad_clip_is_none(tmp_path, monkeypatch):
     train_model(model_config("pendulum", "no_dynamics"), train, val,
                 TrainConfig(epochs=1, lr=3e-3, batch_size=4, seed=0, grad_clip=None), tmp_path / "n", progress=False)
     assert seen and all(m == float("inf") for m in seen)
+
+
+def test_checkpoint_records_its_recipe_and_a_finished_run_loads_without_data(tmp_path):
+    from drfkit.methods.train import finished_run
+
+    train, val = tiny_data()
+    config = model_config("pendulum", "no_dynamics")
+    recipe = {"protocol": "book", "train_blackouts": None, "pend_train_max_noise": 0.5, "fresh_noise": True}
+    stem = tmp_path / "run"
+    assert finished_run(config, train_cfg(epochs=2), stem, data_key="k") is None      # nothing there yet
+    res = train_model(config, train, val, train_cfg(epochs=2), stem, data_key="k", progress=False, recipe=recipe)
+    assert torch_load_checked(res.best_path)["meta"]["recipe"] == recipe
+    assert torch_load_checked(res.last_path)["recipe"] == recipe
+    done = finished_run(config, train_cfg(epochs=2), stem, data_key="k")
+    assert done is not None and done.best_epoch == res.best_epoch and done.best_path == res.best_path
+    assert finished_run(config, train_cfg(epochs=3), stem, data_key="k") is None       # unfinished at 3 epochs
+    assert finished_run(config, train_cfg(epochs=2), stem, data_key="other") is None   # other data

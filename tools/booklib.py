@@ -18,8 +18,8 @@ from urllib.parse import unquote, urlsplit
 # README sections left out of the landing page (the rest is user-facing); a title's start
 DEVELOPER_SECTIONS = ("Library at a glance",)
 # docs/*.md as appendices, in this order (any other docs/*.md follows, by name)
-APPENDIX_ORDER = ("choices", "dynamics", "nuscenes", "grid", "rerun_time", "trust", "training_speed",
-                  "results_history")
+APPENDIX_ORDER = ("choices", "troubleshooting", "dynamics", "nuscenes", "grid", "rerun_time", "trust", "training_speed",
+                  "results_history", "library")
 TABLE_PREVIEW_ROWS = 40
 
 
@@ -119,16 +119,21 @@ def link_claim_ids(text: str, claim_ids: Iterable[str], claims_page: str = "clai
 
 
 def readme_landing(readme: str, profile: str, claim_ids: Iterable[str],
-                   excluded: Iterable[str] = DEVELOPER_SECTIONS) -> str:
+                   excluded: Iterable[str] = DEVELOPER_SECTIONS, report: bool = True) -> str:
     """The README's user-facing sections as the landing page. Its links stay valid because the
-    book's source tree mirrors the repository (docs/, results/<profile>/); the generated results
-    block describes the paper profile, so another profile gets a pointer to its own pages."""
+    book's source tree mirrors the repository (docs/, results/<profile>/ with executed/, tables/,
+    figures/, report.md). One exception: the README's link to ``results/<profile>/claims.md`` goes
+    to the book's claims page (the same rows, with an anchor and the evidence of each claim). The
+    generated results block describes the paper profile, so another profile gets a pointer to its
+    own pages (``report``: whether the book has its report page)."""
     excluded = tuple(excluded)
     text = "".join(body for title, body in _sections(readme) if not (title and title.startswith(excluded)))
     if profile != "paper":
         text = re.sub(r"<!-- results:start -->.*?<!-- results:end -->",
-                      f"This book shows profile `{profile}`: its verdicts are on the [claims page](claims.md), "
-                      f"every number in [its report](results/{profile}/report.md).", text, flags=re.S)
+                      f"This book shows profile `{profile}`: its verdicts are on the [claims page](claims.md)"
+                      + (f", every number in [its report](results/{profile}/report.md)." if report else "."),
+                      text, flags=re.S)
+    text = re.sub(rf"\]\(results/{re.escape(profile)}/claims\.md\)", "](claims.md)", text)
     return link_claim_ids(text, claim_ids)
 
 

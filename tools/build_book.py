@@ -4,17 +4,25 @@ Nothing is executed: a temporary source tree is assembled from what a run produc
 by Sphinx + MyST-NB (``requirements-book.txt``, configuration in ``book/conf.py``):
 
 * the README's user-facing sections as the landing page,
-* the executed notebooks ``results/<profile>/executed/*.ipynb`` in order, with their outputs; a
+* the executed notebooks ``results/<profile>/executed/*.ipynb`` in order, with their outputs, at the
+  same path in the book (``results/<profile>/executed/<name>.html``); a
   notebook whose manifest status is not ``ok`` or whose recorded parameters differ from the
   profile's gets a warning here and an admonition at the top of its page,
 * the claims page (``claims.csv``: one anchor ``claim-<id>`` per claim, linking the notebook section
   that judges it, its tables and figures), the tables, ``report.md``, ``docs/*.md`` as appendices.
 
-The tree mirrors the repository (``docs/``, ``results/<profile>/``), so the README's and the
-report's links hold as written. Sphinx runs with ``-W -n`` (a dangling reference or a missing
-figure fails the build), then every internal link of the built HTML is checked.
+The tree mirrors the repository (``docs/``, ``results/<profile>/`` with its ``executed/``, ``tables/``,
+``figures/`` and ``report.md``), so the README's, the report's and claims.md's links hold as written
+(``booklib.readme_landing`` names the one exception). Sphinx runs with ``-W -n`` (a dangling reference
+or a missing figure fails the build), then every internal link of the built HTML is checked
+(``booklib.check_links``; ``tests/test_book_build.py`` builds a small tree and checks both).
+
+A profile's report.md is written by ``python -m drfkit report``; where a run left none (``make
+quick``), the book renders the same page from the run's files into its own source tree
+(``drfkit.report.writers.report_text``), and results/ stays as the run left it.
 
     python tools/build_book.py --profile paper [--out results/paper/book] [--keep-src DIR]
+                               [--results DIR] [--readme README.md]
 """
 from __future__ import annotations
 
@@ -59,16 +67,22 @@ def expected_params(profile: str) -> tuple[dict, str | None]:
     return out, None
 
 
+def notebook_dir(profile: str) -> str:
+    """Where the executed notebooks sit in the book's source tree: where they sit in the repository."""
+    return f"results/{profile}/executed"
+
+
 def add_notebooks(src: Path, results: Path, profile: str) -> list[str]:
-    """Copy the executed notebooks into src/notebooks/, marking those the manifest does not vouch
-    for; returns their names in order."""
+    """Copy the executed notebooks into src/results/<profile>/executed/ (where the README and the
+    report link them), marking those the manifest does not vouch for; returns their names in order."""
     manifest_path = results / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
     if not manifest:
         warn(f"{manifest_path} is missing: every notebook page is marked")
     expected, profile_error = expected_params(profile)
     names = []
-    (src / "notebooks").mkdir(parents=True)
+    target = src / notebook_dir(profile)
+    target.mkdir(parents=True)
     for path in sorted((results / "executed").glob("[0-9]*.ipynb")):
         name = path.stem
         want = expected.get(name)
@@ -87,16 +101,18 @@ def add_notebooks(src: Path, results: Path, profile: str) -> list[str]:
                 first.source = f"{title}\n\n{note}\n{rest}"
             else:
                 nb.cells.insert(0, nbformat.v4.new_markdown_cell(note))
-        nbformat.write(nb, src / "notebooks" / path.name)
+        nbformat.write(nb, target / path.name)
         names.append(name)
     return names
 
 
-def assemble(src: Path, profile: str) -> dict:
-    """The whole source tree; returns what went in (for the summary)."""
+def assemble(src: Path, profile: str, readme: Path = ROOT / "README.md") -> dict:
+    """The whole source tree from results_root()/<profile>/ (``$DRF_RESULTS`` or results/), ``readme``
+    and docs/; returns what went in (for the summary)."""
     from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES, PEDESTRIAN_CLAIMS
+    from drfkit.util.paths import results_root
 
-    results = ROOT / "results" / profile
+    results = results_root() / profile
     if not sorted((results / "executed").glob("[0-9]*.ipynb")):
         raise SystemExit(f"book: no executed notebooks in {results / 'executed'}: run "
                          f"`make reproduce PROFILE={profile}` first")
@@ -111,8 +127,16 @@ def assemble(src: Path, profile: str) -> dict:
     report = results / "report.md"
     if report.is_file():
         shutil.copy2(report, mirror / "report.md")
+    elif (results / "claims.md").is_file():
+        from drfkit.report.writers import report_text
+
+        command = "make reproduce" if profile == "paper" else f"make reproduce PROFILE={profile}"
+        (mirror / "report.md").write_text(report_text(profile, command), encoding="utf-8")
+        print(f"book: {report} is missing: its page is rendered from the run's files "
+              f"(python -m drfkit report --profiles {profile} writes the file)", file=sys.stderr)
     else:
-        warn(f"{report} is missing (python -m drfkit report --profiles {profile} writes it)")
+        warn(f"{report} is missing and no claims.md to render it from: the book has no report page")
+    has_report = (mirror / "report.md").is_file()
 
     docs = booklib.appendix_order(p.stem for p in (ROOT / "docs").glob("*.md") if p.stem != "book")
     (src / "docs").mkdir()
@@ -125,20 +149,21 @@ def assemble(src: Path, profile: str) -> dict:
     if not rows:
         warn(f"{claims_csv} is missing or empty: the claims page lists no verdict")
     (src / "claims.md").write_text(booklib.claims_page(
-        rows, CLAIM_EVIDENCE, profile, list(CLAIM_SOURCES), notebook_dir="notebooks", tables=tables,
+        rows, CLAIM_EVIDENCE, profile, list(CLAIM_SOURCES), notebook_dir=notebook_dir(profile), tables=tables,
         figures=figures, figures_dir=f"results/{profile}/figures", simulated=PEDESTRIAN_CLAIMS), encoding="utf-8")
     (src / "tables.md").write_text(booklib.tables_page(
         {t: (mirror / "tables" / t).read_text(encoding="utf-8") for t in tables}, profile,
         link_dir=f"results/{profile}/tables"), encoding="utf-8")
 
-    landing = booklib.readme_landing((ROOT / "README.md").read_text(encoding="utf-8"), profile, list(CLAIM_SOURCES))
+    landing = booklib.readme_landing(Path(readme).read_text(encoding="utf-8"), profile, list(CLAIM_SOURCES),
+                                     report=has_report)
 
     def toctree(caption: str, entries: list[str]) -> str:
         return "\n".join(["```{toctree}", f":caption: {caption}", ":maxdepth: 1", "", *entries, "```", ""])
 
     landing += "\n## This book\n\n" + "\n".join([
-        toctree("Notebooks", [f"notebooks/{n}" for n in notebooks]),
-        toctree("Results", ["claims"] + ([f"results/{profile}/report"] if report.is_file() else [])),
+        toctree("Notebooks", [f"{notebook_dir(profile)}/{n}" for n in notebooks]),
+        toctree("Results", ["claims"] + ([f"results/{profile}/report"] if has_report else [])),
         toctree("Appendices", [f"docs/{d}" for d in docs] + ["tables"]),
     ])
     (src / "index.md").write_text(landing, encoding="utf-8")
@@ -156,13 +181,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", default="paper")
     ap.add_argument("--out", type=Path, help="default: results/<profile>/book")
     ap.add_argument("--keep-src", type=Path, help="also keep the assembled source tree here")
+    ap.add_argument("--results", type=Path, help="the results root holding <profile>/ (default: $DRF_RESULTS or results/)")
+    ap.add_argument("--readme", type=Path, default=ROOT / "README.md", help="the landing page's source")
     args = ap.parse_args(argv)
-    out = (args.out or ROOT / "results" / args.profile / "book").resolve()
+    if args.results:
+        os.environ["DRF_RESULTS"] = str(args.results.resolve())  # drfkit.util.paths.results_root
+    from drfkit.util.paths import results_root
+
+    out = (args.out or results_root() / args.profile / "book").resolve()
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="drf-book-") as tmp:
         src = Path(tmp) / "src"
         src.mkdir()
-        info = assemble(src, args.profile)
+        info = assemble(src, args.profile, args.readme)
         if args.keep_src:
             shutil.rmtree(args.keep_src, ignore_errors=True)
             shutil.copytree(src, args.keep_src)

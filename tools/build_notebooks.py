@@ -53,9 +53,12 @@ def parse(text: str, notebook: str) -> nbformat.NotebookNode:
 def execute(path: Path, timeout: int = 1800) -> None:
     from nbclient import NotebookClient
 
+    from drfkit.book.pipeline import ipc_kernels  # the kernel over IPC, as the pipeline's
+
     nb = nbformat.read(path, as_version=4)
-    NotebookClient(nb, timeout=timeout, kernel_name="python3",
-                   resources={"metadata": {"path": str(OUT)}}).execute()
+    with ipc_kernels() as config:
+        NotebookClient(nb, timeout=timeout, kernel_name="python3", config=config,
+                       resources={"metadata": {"path": str(OUT)}}).execute()
     for cell in nb.cells:  # execution counts are noise in diffs; nbval ignores them
         cell.metadata.pop("execution", None)
     nbformat.write(nb, path)

@@ -5,7 +5,8 @@ Serves results/<profile>/book/ on a local port and opens it in headless Chromium
 
 * the landing page: the navigation (a sidebar link to every notebook page), the claims table;
 * the claims page: the claims table and an anchor ``claim-<id>`` for each claim id it lists;
-* one notebook page (``--notebook``, default 03): navigation, at least one figure, and every image
+* one notebook page (``--notebook``, default 04; ``results/<profile>/executed/<name>.html``, where the
+  repository keeps it): navigation, at least one figure, and every image
   on it loaded (``complete`` and ``naturalWidth > 0``);
 * the search page: a query (``--query``) returns results;
 * no request to the book's own server failed (a missing page, image, script or stylesheet).
@@ -77,9 +78,10 @@ def main(argv: list[str] | None = None) -> int:
         print("check_book: playwright is missing: `make book-check` installs requirements-book.txt into .venv "
               "(or: .venv/bin/pip install -r requirements-book.txt -c environment.txt)")
         return 2
-    notebooks = sorted(p.stem for p in (book / "notebooks").glob("*.html"))
+    nb_dir = f"results/{args.profile}/executed"
+    notebooks = sorted(p.stem for p in (book / nb_dir).glob("*.html"))
     if args.notebook not in notebooks:
-        print(f"check_book: no page notebooks/{args.notebook}.html in the book; there are {notebooks}")
+        print(f"check_book: no page {nb_dir}/{args.notebook}.html in the book; there are {notebooks}")
         return 2
     shots = book / "screenshots"
     shots.mkdir(exist_ok=True)
@@ -113,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
             # the landing page
             open_page("index.html", "index.png")
             links = nav_links()
-            missing = [n for n in notebooks if not any(h and h.split("#")[0].endswith(f"notebooks/{n}.html") for h in links)]
+            missing = [n for n in notebooks if not any(h and h.split("#")[0].endswith(f"{nb_dir}/{n}.html") for h in links)]
             check(not missing, f"landing page: the navigation links every notebook page ({len(notebooks)})"
                   + (f"; missing {missing}" if missing else ""))
             claim_links = page.eval_on_selector_all("table a[href*='claims.html#claim-']", "els => els.length")
@@ -134,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
                   + (f"; no anchor for {dangling}" if dangling else ""))
 
             # one notebook page
-            open_page(f"notebooks/{args.notebook}.html", f"{args.notebook}.png")
+            open_page(f"{nb_dir}/{args.notebook}.html", f"{args.notebook}.png")
             page.wait_for_load_state("networkidle")
             figures = page.evaluate(IMAGES_JS, ".cell_output img")
             images = page.evaluate(IMAGES_JS, "article img, main img")

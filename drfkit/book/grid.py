@@ -77,7 +77,9 @@ def grid_runs(values: dict[str, Any], studies: Iterable[str] | None = None, kind
         if set(seeds or []) - set(P.seeds):
             raise ParameterError(f"--seeds {sorted(set(seeds) - set(P.seeds))} are not among the "
                                  f"profile's seeds {P.seeds}; the notebooks would never use them")
-        models = runs_of.study_models(P, study)
+        candidate_protocols = study_protocols(P, study) if protocol is None else [protocol]
+        models = list(dict.fromkeys(k for proto in candidate_protocols if proto in study_protocols(P, study)
+                                    for k in runs_of.study_models(P, study, proto)))
         known_models |= set(models)
         if len(studies) == 1 and set(kinds or []) - set(models):
             raise ParameterError(f"--models {sorted(set(kinds) - set(models))} are not models of the {study} "
@@ -92,7 +94,7 @@ def grid_runs(values: dict[str, Any], studies: Iterable[str] | None = None, kind
         else:
             protocols = [protocol]
         for i, proto in enumerate(protocols):
-            for kind in models:
+            for kind in runs_of.study_models(P, study, proto):
                 if kinds and kind not in kinds:
                     continue
                 for seed in P.seeds:

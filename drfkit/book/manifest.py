@@ -14,10 +14,11 @@ import subprocess
 import time
 from datetime import datetime, timezone
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 from drfkit.util.io import atomic_write_json
-from drfkit.util.paths import REPO_ROOT, results_dir
+from drfkit.util.paths import REPO_ROOT, results_dir, results_root
 
 PACKAGES = ("torch", "numpy", "pandas", "matplotlib", "opencv-python-headless", "papermill", "nbval",
             "PyYAML", "tqdm", "jupyter", "nbclient", "ipykernel", "pytest")
@@ -27,15 +28,34 @@ def now_iso() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
-def git_commit() -> dict[str, Any]:
+def _outputs_inside(repo: Path) -> list[str]:
+    """The folders runs write to that lie inside ``repo`` (results/, and $DRF_RESULTS if elsewhere
+    in it), as paths relative to it."""
+    out = []
+    for folder in {repo / "results", results_root()}:
+        try:
+            rel = folder.resolve().relative_to(repo.resolve()).as_posix()
+        except ValueError:  # outside the repository: git does not see it
+            continue
+        if rel != ".":
+            out.append(rel)
+    return sorted(out)
+
+
+def git_commit(repo: Path = REPO_ROOT) -> dict[str, Any]:
+    """The commit and whether the code differs from it: ``dirty`` counts changes to tracked or new
+    files outside the run's outputs (results/: every run rewrites them, so counting them would call
+    every tree dirty after its first run)."""
     def run(*args: str) -> str:
         try:
-            return subprocess.run(["git", *args], cwd=REPO_ROOT, capture_output=True, text=True,
+            return subprocess.run(["git", *args], cwd=repo, capture_output=True, text=True,
                                   timeout=10).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return ""
 
-    return {"commit": run("rev-parse", "HEAD") or None, "dirty": bool(run("status", "--porcelain"))}
+    outputs = [f":(exclude){folder}" for folder in _outputs_inside(repo)]
+    return {"commit": run("rev-parse", "HEAD") or None,
+            "dirty": bool(run("status", "--porcelain", "--", ".", *outputs))}
 
 
 def cpu_name() -> str:
@@ -154,9 +174,11 @@ def cell_times(executed_notebook) -> list[dict[str, Any]]:
     return rows
 
 
-def record_cell_times(profile: str, notebook: str, executed_notebook) -> None:
+def record_cell_times(profile: str, notebook: str, executed_notebook, run: list[str] | None = None) -> None:
     """Replace ``notebook``'s rows of ``results/<profile>/cell_times.csv`` (notebook, cell,
-    seconds, first_line): where a profile's time goes, cell by cell, from its last run."""
+    seconds, first_line): where a profile's time goes, cell by cell. ``run``: the notebooks of the
+    run this belongs to (the pipeline's list, ``notebook`` among them); the rows of any other
+    notebook are dropped, so the file describes that run only, never a notebook since renamed."""
     import pandas as pd
 
     from drfkit.util.io import atomic_write_csv
@@ -169,26 +191,35 @@ def record_cell_times(profile: str, notebook: str, executed_notebook) -> None:
         return
     new = pd.DataFrame(rows, columns=["cell", "seconds", "first_line"]).assign(notebook=notebook)
     old = pd.read_csv(path) if path.exists() else new.iloc[:0]
-    table = pd.concat([old[old["notebook"] != notebook], new], ignore_index=True).sort_values(["notebook", "cell"])
+    keep = old["notebook"] != notebook
+    if run is not None:
+        keep &= old["notebook"].isin(run)
+    table = pd.concat([old[keep], new], ignore_index=True).sort_values(["notebook", "cell"])
     atomic_write_csv(path, table[["notebook", "cell", "seconds", "first_line"]])
 
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m drfkit manifest --cell-times PROFILE``: rebuild ``cell_times.csv`` from the
-    executed notebooks of a profile (the pipeline writes it after each notebook)."""
+    executed notebooks of a profile's last pipeline run (the manifest's ``pipeline.notebooks``; the
+    pipeline writes it after each notebook), dropping every other notebook's rows."""
     import argparse
 
     parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
     parser.add_argument("--cell-times", metavar="PROFILE", required=True)
     args = parser.parse_args(argv)
-    executed = sorted(results_dir(args.cell_times, "executed").glob("[0-9]*.ipynb"))
-    executed = [p for p in executed if not p.name.endswith(".failed.ipynb")]
+    from drfkit.util.paths import NOTEBOOKS_DIR
+
+    # the last pipeline's notebooks, else every notebook of the book (their sources' names)
+    run = read_manifest(args.cell_times).get("pipeline", {}).get("notebooks") \
+        or sorted(p.stem for p in NOTEBOOKS_DIR.glob("[0-9][0-9]_*.ipynb"))
+    executed = [results_dir(args.cell_times, "executed") / f"{name}.ipynb" for name in run]
+    executed = [p for p in executed if p.is_file()]
     if not executed:
         print(f"no executed notebooks under results/{args.cell_times}/executed/; run the pipeline first")
         return 1
     for path in executed:
-        record_cell_times(args.cell_times, path.stem, path)
-    print(f"wrote results/{args.cell_times}/cell_times.csv from {len(executed)} notebooks")
+        record_cell_times(args.cell_times, path.stem, path, run=[p.stem for p in executed])
+    print(f"wrote results/{args.cell_times}/cell_times.csv from {len(executed)} notebooks: {', '.join(p.stem for p in executed)}")
     return 0
 
 

@@ -9,7 +9,7 @@ A notebook's outputs are all or nothing: if it fails or is stopped (Ctrl-C, SIGT
 output file it changed is put back as it was before it started (checkpoints and data caches
 excepted: they are written atomically and resume), its kernel and children are stopped, and the
 manifest says ``interrupted in <notebook>`` or ``failed in <notebook>``. ``cell_times.csv`` holds
-the seconds of every cell of the last run of each notebook. Rerunning the same
+the seconds of every cell of the last run's notebooks (no other notebook's rows). Rerunning the same
 command after that skips the notebooks that finished with the same parameters and code.
 
 ``--jobs N`` (N > 1, ``make reproduce JOBS=N``) or ``--scheduler ADDRESS`` first trains the missing
@@ -23,7 +23,9 @@ import hashlib
 import os
 import signal
 import sys
+import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from drfkit.util.io import atomic_write_bytes, exclusive_lock, param_hash
@@ -37,6 +39,22 @@ from drfkit.util.progress import Echo
 # parameters) and the manifest (which records the interruption itself).
 UNSNAPSHOTTED = ("models", "data", "ablation", "predictions", "measurements", "manifest.json", ".snapshot",
                  ".pipeline.lock")
+
+
+@contextmanager
+def ipc_kernels():
+    """The traitlets config under which the pipeline's Jupyter kernels run (and ``make notebooks``'):
+    over IPC, Unix sockets in a private temporary folder (mode 0700, removed after), instead of TCP
+    ports on localhost. Nothing listens on a port, only this user can connect, and ipykernel's
+    "Kernel is running over TCP without encryption" warning, which every notebook printed into the
+    terminal, has no cause left (it is not silenced: a kernel started over TCP would still say so)."""
+    from traitlets.config import Config
+
+    with tempfile.TemporaryDirectory(prefix="drfkit-kernel-") as folder:
+        config = Config()
+        config.KernelManager.transport = "ipc"
+        config.KernelManager.ip = os.path.join(folder, "kernel")  # the sockets: kernel-<n>
+        yield config
 
 
 def notebook_path(name: str) -> Path:
@@ -217,11 +235,11 @@ def _run_locked(profile, profile_name, names, per_notebook, values, overrides, k
                 # papermill rewrites its output after every cell: run into a partial file and move it
                 # into place when done, so a killed run never leaves a half-executed notebook behind;
                 # the long evaluations inside report to the terminal through drfkit.util.progress
-                with Echo(out_dir / f".{name}.progress.log"):
+                with Echo(out_dir / f".{name}.progress.log"), ipc_kernels() as kernel_config:
                     pm.execute_notebook(
                         str(notebook_path(name)), str(partial),
                         parameters=per_notebook[name], progress_bar=True, kernel_name=kernel,
-                        cwd=str(NOTEBOOKS_DIR), log_output=False,
+                        cwd=str(NOTEBOOKS_DIR), log_output=False, config=kernel_config,
                     )
             except (KeyboardInterrupt, Interrupted) as exc:
                 _stop_descendants()
@@ -249,7 +267,7 @@ def _run_locked(profile, profile_name, names, per_notebook, values, overrides, k
                 return 1
             os.replace(partial, final)
             (root / SNAPSHOT_DIR / f"{name}.zip").unlink(missing_ok=True)
-            record_cell_times(profile_name, name, final)
+            record_cell_times(profile_name, name, final, run=names)
             (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
             durations[name] = round(time.perf_counter() - t, 1)
             finished[name] = {"params": params_key, "code": code, "at": now_iso()}

@@ -53,10 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         values = load_profile(args.profile) | parse_overrides(args.set)
         P = for_notebook(notebook, values)
-        unknown = sorted(set(args.models or []) - set(studies.study_models(P, args.study)))
+        known = studies.study_models(P, args.study, args.protocol)
+        unknown = sorted(set(args.models or []) - set(known))
         if unknown:
-            raise ParameterError(f"--models {unknown} are not models of the {args.study} study in this "
-                                 f"profile; choose from {studies.study_models(P, args.study)}")
+            raise ParameterError(f"--models {unknown} are not models of the {args.study} study under the "
+                                 f"{args.protocol} protocol in this profile; choose from {known}")
         if set(args.seeds or []) - set(P.seeds):
             raise ParameterError(f"--seeds {sorted(set(args.seeds) - set(P.seeds))} are not among the "
                                  f"profile's seeds {P.seeds}; the notebooks would never use them")

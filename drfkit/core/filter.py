@@ -41,7 +41,7 @@ from __future__ import annotations
 import torch
 from torch.autograd.function import once_differentiable
 
-__all__ = ["kalman_predict", "kalman_update", "kalman_step", "CHOLESKY_JITTER"]
+__all__ = ["kalman_predict", "kalman_update", "kalman_step", "ekf_update", "CHOLESKY_JITTER"]
 
 # Multiplier of the jitter added to the diagonal of S when its Cholesky factorisation
 # fails (S numerically not positive definite, e.g. float32 with badly scaled P and R).
@@ -252,6 +252,37 @@ def kalman_update(z: torch.Tensor, P: torch.Tensor, w: torch.Tensor, R: torch.Te
     P_new = (I_minus_K @ P) @ I_minus_K.mT
     KR = K * R.unsqueeze(-2) if r_diag else K @ R
     P_new = P_new + KR @ K.mT
+    return z_new, _symmetrise(P_new), K
+
+
+def ekf_update(z: torch.Tensor, P: torch.Tensor, innovation: torch.Tensor, H: torch.Tensor, R: torch.Tensor
+               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Kalman update with a general (linearised) observation matrix, Joseph form.
+
+        S = H P H^T + R,   K = P H^T S^-1,   z <- z + K y,
+        P <- (I - K H) P (I - K H)^T + K R K^T
+
+    z (..., n); P (..., n, n); innovation y = w - h(z) (..., m); H (..., m, n), the Jacobian of h at
+    the prior (an EKF's); R (..., m) diagonal. Returns z_new (..., n), P_new (..., n, n) symmetrised and
+    K (..., n, m). The gain comes from a Cholesky solve of S (m is small: the known-dynamics filter's
+    m = 2); the Joseph form keeps P positive definite when K carries rounding error, as in
+    :func:`kalman_update`. Plain autograd differentiates it.
+    """
+    for name, t in (("z", z), ("P", P), ("innovation", innovation), ("H", H), ("R", R)):
+        _require_tensor(name, t)
+    _check_dtypes(z=z, P=P, innovation=innovation, H=H, R=R)
+    n, m = _state_size(z), innovation.shape[-1]
+    _check_matrix("P", P, n)
+    if H.shape[-2:] != (m, n) or R.shape[-1] != m:
+        raise ValueError(f"ekf_update: H must be (..., {m}, {n}) and R (..., {m}) for a state of {n} and "
+                         f"an innovation of {m}; got H {_shape(H)}, R {_shape(R)}")
+    PHt = P @ H.mT                                                        # (..., n, m)
+    S = _add_diagonal(H @ PHt, R, inplace_ok=False)                       # (..., m, m)
+    K = torch.cholesky_solve(PHt.mT, _safe_cholesky(_symmetrise(S))).mT   # (..., n, m)
+    z_new = z + (K @ innovation.unsqueeze(-1)).squeeze(-1)
+    I_minus_KH = -(K @ H)
+    I_minus_KH.diagonal(dim1=-2, dim2=-1).add_(1.0)
+    P_new = (I_minus_KH @ P) @ I_minus_KH.mT + (K * R.unsqueeze(-2)) @ K.mT
     return z_new, _symmetrise(P_new), K
 
 

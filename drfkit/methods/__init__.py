@@ -1,7 +1,7 @@
 """Layer 4, methods: what is done to models and arrays, with explicit arguments, never the
 profile: training (``train``, ``run_config``, ``objectives``, ``protocols``), predictions with uncertainty
 (``uncertainty``, ``predictions``), Kalman-gain gating (``gating``), mechanism diagnostics
-(``diagnostics``), true-physics bounds (``oracle``), timing (``timing``). Imports util, core,
+(``diagnostics``), true-physics references (``oracle``), timing (``timing``). Imports util, core,
 data and models.
 
 The modules are re-exported by name (``from drfkit.methods import diagnostics``), loaded on first use;

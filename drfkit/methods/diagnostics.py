@@ -20,12 +20,10 @@ import numpy as np
 import torch
 
 from drfkit.core.metrics import rank_correlation
-from drfkit.models.parts import mean_and_log_variance
 
 CLEAN_LEVEL = 0.0      # a frame with noise level <= this is clean
 NOISY_LEVEL = 0.4      # a frame with noise level > this is noisy
 PURE_NOISE_LEVEL = 1.0  # pure uniform noise (the blackout's frames)
-SPECTRAL_SUBSAMPLE = 7  # eigenvalues of every 7th F_t (an eigendecomposition per matrix is the cost)
 
 
 def _observed(model) -> int:
@@ -37,29 +35,23 @@ def filter_trace(model, inputs: torch.Tensor, batch_size: int = 100) -> dict[str
     """Per-frame quantities of ``model`` on ``inputs`` (N, T, ...), in eval mode.
 
     Every model of the DRF family: 'r' (N, T) mean observation variance over the observed dims,
-    'mean' (N, T, out) the decoder's mean. The DRF also: 'gain' (N, T) mean of diag K_t over
-    the observed dims (1 at t = 0); 'prior_err' and 'static_err' (N, T-1): ||F_t z_{t-1} - w_t||
-    and ||z_{t-1} - w_t|| on the observed dims; 'spectral_radius' (M,) of a subsample of F_t.
+    'mean' (N, T, out) the decoder's mean. A filter (a model with ``filter_diagnostics``: the DRF, the
+    known-dynamics filter) also: 'gain' (N, T) its gain on the observed dims (1 at t = 0);
+    'prior_err' and 'static_err' (N, T-1): the distance of the one-step prediction, and of the last
+    posterior, to the next observation; 'spectral_radius' (M,) of its transition matrices.
     """
     was_training = model.training
     model.eval()
     try:
-        k = _observed(model)
         parts: dict[str, list[np.ndarray]] = {}
         for start in range(0, inputs.shape[0], batch_size):
             x = inputs[start:start + batch_size]
-            w, r = model.observe(x)
-            out = {"r": r[..., :k].mean(-1)}
-            if model.kind == "drf":
-                tr = model.filter_steps(w, r, return_gains=True, return_transition=True)
-                z, F = tr["z"], tr["F"]
-                out["gain"] = tr["gains"].diagonal(dim1=-2, dim2=-1)[..., :k].mean(-1)
-                out["prior_err"] = (tr["z_prior"] - w[:, 1:])[..., :k].norm(dim=-1)
-                out["static_err"] = (z[:, :-1] - w[:, 1:])[..., :k].norm(dim=-1)
-                sample = F.flatten(0, 1)[::SPECTRAL_SUBSAMPLE].double()
-                out["spectral_radius"] = torch.linalg.eigvals(sample).abs().amax(-1) if len(sample) else sample.new_empty(0)
-                h = mean_and_log_variance(z, tr["p_diag"])   # what features() hands the decoder
+            if hasattr(model, "filter_diagnostics"):
+                out = model.filter_diagnostics(x)
+                h = out.pop("h")
             else:
+                _, r = model.observe(x)
+                out = {"r": r[..., :_observed(model)].mean(-1)}
                 h, _ = model.features(x)
             out["mean"] = model.head(h)[0]
             for name, value in out.items():

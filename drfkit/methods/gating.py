@@ -22,9 +22,11 @@ validation set; ``choose_direction`` / ``choose_threshold`` take only validation
 smallest dropout fraction whose validation PICP is within ``tolerance`` of
 always-dropout's validation PICP. It is an absolute score value, so on noisier frames
 more of them cross it. The study (``drfkit.study.gating_study``) fits on the ``val`` split (held-out sequences) at
-the test's noise level by default: the gate is tuned for the condition it runs in; at the
-training noise, intervals without dropout may already cover as well as with it, and the
-rule then turns dropout off (``val_noise`` picks the validation noise).
+the test's noise level by default: labelled data from the shifted condition, which a deployed
+system does not have, so an optimistic reference; at the training noise (what a deployed system
+can tune on, ``val_noise``), intervals without dropout may already cover as well as with it, and
+the rule then turns dropout off. Neither tuned gate decides claim C7, which is judged on the
+whole threshold sweep (``drfkit.study.claims.efficiency.c7_gating``).
 
 Gated inference is real, not simulated: features (encoder + filter) run once, the head
 runs with S samples on the gathered selected frames and once, deterministically, on the
@@ -36,7 +38,9 @@ cost of two passes instead of one per threshold. Only models with a filter (DRF)
 
 Settings (the paper's table): ``no_dropout`` (aleatoric only), ``random`` (the same number
 of frames as the Kalman-gain gate selects on test, drawn uniformly, seeded),
-``kalman_gain``, ``always`` (MC dropout on every frame).
+``kalman_gain``, ``always`` (MC dropout on every frame). The threshold sweep adds an *oracle*
+(``oracle_selection``: the same number of frames, those of largest true error), the best any
+competency score could select; it reads the targets, so it is compared, never run or timed.
 """
 from __future__ import annotations
 
@@ -167,6 +171,23 @@ def random_selection(mask: torch.Tensor, n_selected: int, seed: int) -> torch.Te
     pick = valid[torch.randperm(valid.numel(), generator=gen)[:n_selected].to(valid.device)]
     out = torch.zeros(mask.numel(), dtype=torch.bool, device=mask.device)
     out[pick] = True
+    return out.view_as(mask)
+
+
+def oracle_selection(abs_error: torch.Tensor, mask: torch.Tensor, n_selected: int) -> torch.Tensor:
+    """The ``n_selected`` True frames of ``mask`` (B, T) with the largest true error ``abs_error`` (B, T)
+    of the deterministic prediction (ties by position). A gate nobody can run -- it reads the targets --
+    and the far end of the gating sweep's comparison: what a perfect competency score would select
+    with as many frames as the Kalman-gain gate. (B, T) bool."""
+    if mask.dtype != torch.bool or mask.ndim != 2 or abs_error.shape != mask.shape:
+        raise ValueError(f"abs_error and mask must both be (B, T) (mask bool), got {tuple(abs_error.shape)} and "
+                         f"{mask.dtype} {tuple(mask.shape)}")
+    n_real = int(mask.sum())
+    if isinstance(n_selected, bool) or not isinstance(n_selected, int) or not 0 <= n_selected <= n_real:
+        raise ValueError(f"n_selected must be an int in [0, {n_real}] (the real frames), got {n_selected!r}")
+    error = abs_error.reshape(-1).double().masked_fill(~mask.reshape(-1), -math.inf)
+    out = torch.zeros(mask.numel(), dtype=torch.bool, device=mask.device)
+    out[torch.topk(error, n_selected).indices] = True
     return out.view_as(mask)
 
 
@@ -363,7 +384,7 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
 
 __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "choose_direction",
-    "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "random_gating",
+    "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "oracle_selection", "random_gating",
     "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting",
     "Gate", "fit_gate",
 ]

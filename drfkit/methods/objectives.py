@@ -16,7 +16,8 @@ bool ``mask`` of real frames (None = all), and returns the mean over the valid v
   ``TrainConfig.mse_warmup`` epochs of it before the objective, the staged fit that BackpropKF and
   Kloss et al. 2021 recommend when a sensor model does not learn under the NLL).
 
-``batch_loss`` adds, for a filter, the same objective on its one-step prior (``prior_weight``).
+``batch_loss`` adds, for a filter, the same objective on its one-step prior (``prior_weight``) and on its
+observation alone (``obs_weight``).
 """
 from __future__ import annotations
 
@@ -71,25 +72,36 @@ def objective_loss(model, objective: str, beta: float, mean, sigma, targets, mas
     raise ValueError(f"unknown training objective {objective!r}; choose from {OBJECTIVES}")
 
 
-def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, prior_weight: float = 0.0
-               ) -> torch.Tensor:
-    """The training loss of one batch: ``objective_loss`` of the model's output and, with
-    ``prior_weight`` > 0, that weight times the same objective of the one-step prior decoded for
-    frames 1..T-1 (``forward_with_prior``; a filter's prediction of each frame before seeing it,
-    so the transition is trained to predict rather than only to carry the posterior)."""
-    if prior_weight <= 0:
+def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, prior_weight: float = 0.0,
+               obs_weight: float = 0.0) -> torch.Tensor:
+    """The training loss of one batch: ``objective_loss`` of the model's output, plus
+
+    * ``prior_weight`` > 0: that weight times the same objective of the one-step prior decoded for
+      frames 1..T-1 (``forward_with_prior``; a filter's prediction of each frame before seeing it, so
+      the transition is trained to predict rather than only to carry the posterior);
+    * ``obs_weight`` > 0: that weight times the same objective of the observation alone
+      (``observation_output``: w_t with r_t as its variance), so that r_t is fitted as the variance of
+      what frame t shows -- high on a bad frame, which is what lowers a filter's gain there.
+    """
+    if prior_weight > 0:
+        if not hasattr(model, "forward_with_prior"):
+            raise ValueError(f"TrainConfig.prior_weight = {prior_weight} asks for the one-step prior's loss, but "
+                             f"{type(model).__name__} has no filter prior; set prior_weight = 0 for it")
+        (mean, sigma), (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
+    else:
         mean, sigma = model(inputs)
-        return objective_loss(model, objective, beta, mean, sigma, targets, mask)
-    if not hasattr(model, "forward_with_prior"):
-        raise ValueError(f"TrainConfig.prior_weight = {prior_weight} asks for the one-step prior's loss, but "
-                         f"{type(model).__name__} has no filter prior; set prior_weight = 0 for it")
-    (mean, sigma), (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
     loss = objective_loss(model, objective, beta, mean, sigma, targets, mask)
-    if targets.shape[1] < 2:
-        return loss
-    prior_mask = None if mask is None else mask[:, 1:]
-    return loss + prior_weight * objective_loss(model, objective, beta, prior_mean, prior_sigma,
-                                                targets[:, 1:], prior_mask)
+    if prior_weight > 0 and targets.shape[1] >= 2:
+        prior_mask = None if mask is None else mask[:, 1:]
+        loss = loss + prior_weight * objective_loss(model, objective, beta, prior_mean, prior_sigma,
+                                                    targets[:, 1:], prior_mask)
+    if obs_weight > 0:
+        if not hasattr(model, "observation_output"):
+            raise ValueError(f"TrainConfig.obs_weight = {obs_weight} asks for an observation loss, but "
+                             f"{type(model).__name__} has no observation; set obs_weight = 0 for it")
+        obs_mean, obs_sigma = model.observation_output(inputs)
+        loss = loss + obs_weight * objective_loss(model, objective, beta, obs_mean, obs_sigma, targets, mask)
+    return loss
 
 
 def make_optimiser(model, cfg):

@@ -1,12 +1,14 @@
-"""Bounds that use knowledge the learned models do not have.
+"""References that use knowledge the learned models do not have.
 
-How far is a learned filter from the best that is physically possible? Three references:
+How does a learned filter compare with filters that know what generated the data? Three references
+(comparisons, not bounds: a model whose encoder is trained through its filter can beat them):
 
 * ``pendulum_particle_filter`` -- a causal particle filter with the generator's TRUE pendulum
   physics (``drfkit.data.pendulum``: theta'' = -c sin theta - friction theta', velocity noise
   N(0, 0.1^2) per frame, start at rest), fed per-frame estimates of (cos, sin) and their sigma
   (in the book: the no_dynamics model's, sigma scaled by a factor chosen on validation data).
-  It is the best a filter can do with that encoder's outputs, up to Monte Carlo error.
+  It is what this filter makes of that encoder's outputs (up to Monte Carlo error), not the best any
+  model can do: the DRF's encoder is trained through its filter, and can do better.
 * ``template_angles`` -- "what the pixels hold": each frame matched against the renderer's
   own clean images at ``n_angles`` angles (normalised correlation). Per frame, no dynamics.
 * ``constant_velocity_filter`` -- for pedestrians: a Kalman filter with a constant-velocity
@@ -193,9 +195,9 @@ def constant_velocity_filter(obs: np.ndarray, obs_sigma: np.ndarray, observed: n
 
 
 def like_for_like_mae(per_frame: np.ndarray, test: Any) -> float:
-    """The MAE a bound or reference is compared with the models by: on the blackout set, the mean
+    """The MAE a reference is compared with the models by: on the blackout set, the mean
     over the blackout frames alone (``blackout_summary``'s 'mae_blackout', as every model's blackout
-    MAE); on any other set, over every frame. One function for both sides, so a bound is never
+    MAE); on any other set, over every frame. One function for both sides, so a reference is never
     averaged over other frames than the models it is set beside."""
     per_frame = np.asarray(per_frame, dtype=np.float64)
     if test == "blackout":

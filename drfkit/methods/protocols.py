@@ -81,6 +81,35 @@ ROUND2_VARIANTS = {
 }
 VARIANTS.update(ROUND2_VARIANTS)
 
+# The third round: competence. Trained without pure-noise frames (max noise 0.5 only), so 0.75, 1.0 and the
+# blackout stay out of distribution. Levers that make r follow frame quality and let the gain follow r:
+# an observation loss (w_t decoded alone, r_t its variance: ``TrainConfig.obs_weight``), a monotone link
+# from one learned quality score to every r_i (``noise_head='quality'``), and a state whose units are
+# physical (the known-dynamics filter, ``drfkit.models.known_dynamics``: r and q on the same scale).
+_FIT_OBS = FIT_THE_MEAN | {"obs_weight": 1.0}
+_FIT_PRIOR_OBS = _FIT_PRIOR | {"obs_weight": 1.0}
+_SPLIT_BOOK = BOOK_DRF | {"decoder_split": True}
+_PHYSICAL_DRF = {"transition_kind": "basis", "latent": 17, "memory_dims": 15, "noise_head": "log", "readout": "identity"}
+ROUND3_VARIANTS = {
+    "fit_prior_split_book_clean": {"kind": "drf", "model": _SPLIT_BOOK, "train": _FIT_PRIOR},
+    "fit_obs_prior_split_book": {"kind": "drf", "model": _SPLIT_BOOK, "train": _FIT_PRIOR_OBS},
+    "fit_obs_quality_book": {"kind": "drf", "model": _SPLIT_BOOK | {"noise_head": "quality"}, "train": _FIT_PRIOR_OBS},
+    # the DRF in the output's units: 2 observed latent dims ARE (cos, sin) (read as they are, no decoder), 15
+    # memory dims, so r and q are variances of (cos, sin) and the observation loss pins r's scale
+    "fit_physical_book": {"kind": "drf", "model": _PHYSICAL_DRF, "train": _FIT_PRIOR_OBS},
+    "fit_known_dynamics": {"kind": "known_dynamics", "train": _FIT_OBS},
+    "fit_known_dynamics_e2e": {"kind": "known_dynamics", "train": FIT_THE_MEAN},
+    "fit_lstm": {"kind": "lstm", "train": FIT_THE_MEAN},
+    # the encoder probe: is no_dynamics' distance to the per-frame Bayes estimate capacity or data? New
+    # trajectories every epoch (unlimited frames), a wider encoder (32 channels, 128 features), both
+    "fit_no_dynamics_fresh_motion": {"kind": "no_dynamics", "train": FIT_THE_MEAN | {"fresh_motion": True}},
+    "fit_no_dynamics_wide": {"kind": "no_dynamics", "model": {"encoder_channels": 32, "feature_dim": 128},
+                             "train": FIT_THE_MEAN},
+    "fit_no_dynamics_wide_fresh_motion": {"kind": "no_dynamics", "model": {"encoder_channels": 32, "feature_dim": 128},
+                                          "train": FIT_THE_MEAN | {"fresh_motion": True}},
+}
+VARIANTS.update(ROUND3_VARIANTS)
+
 # The ablation's budgets (``drfkit.study.ablation``); data from the profiles' pend_data_seed.
 ABLATION_BUDGETS: dict[str, dict[str, Any]] = {
     # 480 Adam steps: 5-12 minutes per run on one CPU thread (two runs side by side on 2 cores)
@@ -99,7 +128,8 @@ PROTOCOLS: dict[str, dict[str, str]] = {
     # blackout targets on validation (gain on pure noise <= 0.25 of clean, F z predicts the next
     # observation better than z, blackout MAE <= 0.10); the paper's configuration is more accurate at
     # 0.75 but its filter does not filter (docs/dynamics.md). The round-1 choice was "book".
-    "book": {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout", "lstm": "fit_lstm_blackout"},
+    "book": {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout", "lstm": "fit_lstm_blackout",
+             "known_dynamics": "fit_known_dynamics"},
 }
 
 

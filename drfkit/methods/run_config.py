@@ -32,6 +32,7 @@ class TrainConfig:
     weight_decay: float = 0.0  # decoupled (AdamW) when > 0
     window: int | None = None  # train on one random window of this many frames per sequence and epoch
     prior_weight: float = 0.0  # weight of the loss on a filter's one-step prior (drfkit.methods.objectives.batch_loss)
+    obs_weight: float = 0.0  # weight of the loss on the observation alone, (w_t, r_t) (drfkit.methods.objectives.batch_loss)
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
@@ -60,6 +61,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.window must be None (whole sequences) or an integer >= 2, got {self.window!r}")
         if not (isinstance(self.prior_weight, (int, float)) and self.prior_weight >= 0):
             raise ValueError(f"TrainConfig.prior_weight must be a number >= 0 (0 = no prior loss), got {self.prior_weight!r}")
+        if not (isinstance(self.obs_weight, (int, float)) and self.obs_weight >= 0):
+            raise ValueError(f"TrainConfig.obs_weight must be a number >= 0 (0 = no observation loss), got {self.obs_weight!r}")
 
 
 SELECTION_METRICS = ("loss", "l1")
@@ -67,7 +70,8 @@ LR_SCHEDULES = ("step", "cosine")
 # Fields added after checkpoints were committed: at these values they stay out of names and
 # fingerprints, so every run made before them keeps its files (and resumes).
 LATER_FIELDS = {"select_on": "loss", "objective": "model", "beta": 1.0, "mse_warmup": 0, "lr_schedule": "step",
-                "weight_decay": 0.0, "window": None, "prior_weight": 0.0}
+                "weight_decay": 0.0, "window": None, "prior_weight": 0.0,
+                "obs_weight": 0.0}
 
 
 def train_fields(cfg: "TrainConfig") -> dict[str, Any]:

@@ -130,6 +130,7 @@ def train_model(
     progress: bool = True,
     stop_after_epochs: int | None = None,
     fresh_train: Callable[[int], SequenceData] | None = None,
+    recipe: dict[str, Any] | None = None,
 ) -> TrainResult:
     """Train ``build_model(model_config)``; checkpoints at ``<stem>-last.pt`` / ``<stem>-best.pt``.
 
@@ -139,7 +140,9 @@ def train_model(
     ``fresh_train(epoch)``, if given, returns the training data of that epoch (the same clean
     sequences under new noise, drawn from a seed that depends on ``epoch`` alone, so a resumed run
     sees what an uninterrupted one saw); ``train`` is then used only for its size. Whatever makes
-    it differ between runs belongs in ``data_key``.
+    it differ between runs belongs in ``data_key``. ``recipe`` (plain values: the training noise, the
+    corruptions such as pure-noise blackouts, fresh noise, the protocol or variant) is stored in both
+    checkpoints' ``meta`` / state as ``recipe``, so a reader can tell from the file what the model saw.
 
     One writer per checkpoint: the call holds an OS lock on ``<stem>``; a second process gets a
     ``LockedError`` naming the holder (after LOCK_WAIT_S) and writes nothing. ``-last.pt`` also
@@ -150,7 +153,32 @@ def train_model(
     stem = Path(checkpoint_stem)
     with exclusive_lock(stem.parent / f".{stem.name}.lock", f"checkpoint {stem}", wait_s=LOCK_WAIT_S):
         return _train_locked(model_config, train, val, cfg, stem, data_key=data_key, device=device,
-                             progress=progress, stop_after_epochs=stop_after_epochs, fresh_train=fresh_train)
+                             progress=progress, stop_after_epochs=stop_after_epochs, fresh_train=fresh_train,
+                             recipe=recipe)
+
+
+def finished_run(model_config: dict[str, Any], cfg: TrainConfig, checkpoint_stem: str | Path, *,
+                 data_key: str = "") -> TrainResult | None:
+    """The result of a run whose ``-last.pt`` says it is finished under this configuration, read from
+    its files alone (no data, no lock: both files are written atomically); None if it must (re)train
+    -- missing, unfinished, another fingerprint, or a best checkpoint that needs restoring -- which
+    ``train_model`` then does or explains."""
+    stem = Path(checkpoint_stem)
+    last_path, best_path = Path(f"{stem}-last.pt"), Path(f"{stem}-best.pt")
+    if not (last_path.exists() and best_path.exists()):
+        return None
+    try:
+        state = torch_load_checked(last_path)
+    except CorruptArtefactError:
+        return None
+    if state.get("fingerprint") != fingerprint(model_config, cfg, data_key) \
+            or not run_finished(state["epoch"], state["best_epoch"], cfg):
+        return None
+    result = TrainResult(best_path=best_path, last_path=last_path, history=state["history"],
+                         best_epoch=state["best_epoch"], best_val_loss=state["best_val_loss"],
+                         resumed_from=state["epoch"])
+    result.stopped_early = state["epoch"] < cfg.epochs
+    return result
 
 
 def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None) -> None:
@@ -169,7 +197,7 @@ def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None)
 
 
 def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, data_key, device, progress,
-                  stop_after_epochs, fresh_train=None) -> TrainResult:
+                  stop_after_epochs, fresh_train=None, recipe=None) -> TrainResult:
     from drfkit.models import build_model
 
     device = torch.device(device)
@@ -242,7 +270,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
             inputs, targets, mask = data.batch(idx, device)
             if cfg.window is not None:
                 inputs, targets, mask = random_windows(inputs, targets, mask, cfg.window, windows)
-            loss = batch_loss(model, objective, cfg.beta, inputs, targets, mask, cfg.prior_weight)
+            loss = batch_loss(model, objective, cfg.beta, inputs, targets, mask, cfg.prior_weight, cfg.obs_weight)
             if not torch.isfinite(loss):
                 raise NonFiniteLossError(
                     f"non-finite loss {loss.item()} at epoch {epoch + 1}, step {step} (sequences "
@@ -272,7 +300,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
             best = {"format": CHECKPOINT_FORMAT, "config": model_config,
                     "state_dict": {k: v.detach().clone() for k, v in model.state_dict().items()},
                     "meta": {"epoch": epoch + 1, "val_loss": val_loss, "seed": cfg.seed, "fingerprint": fp,
-                             "train": vars(cfg), "data": data_key}}
+                             "train": vars(cfg), "data": data_key, "recipe": dict(recipe or {})}}
             atomic_torch_save(best_path, best)
         atomic_torch_save(last_path, {
             "format": CHECKPOINT_FORMAT, "fingerprint": fp, "epoch": epoch + 1,
@@ -281,7 +309,7 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
             "rng_cuda": torch.cuda.get_rng_state(device) if device.type == "cuda" else None,
             "history": result.history, "best_epoch": result.best_epoch,
             "best_val_loss": result.best_val_loss, "best": best,
-            "threads": torch.get_num_threads(), "device_type": device.type})
+            "threads": torch.get_num_threads(), "device_type": device.type, "recipe": dict(recipe or {})})
         if bar is not None:
             bar.update(1)
             bar.set_postfix(train=f"{train_loss:.3f}", val=f"{val_loss:.3f}", refresh=False)

@@ -10,13 +10,14 @@ import inspect
 from typing import Any
 
 from drfkit.models.drf import DeepRecursiveFilter
+from drfkit.models.known_dynamics import KnownDynamicsFilter
 from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_loss
 from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads
 from drfkit.models.recursion import TransitionNetwork
 from drfkit.models.sequence import INPUT_KINDS, LSTMBaseline, NoDynamics, SequenceModel, gaussian_nll
 
 MODEL_CLASSES: dict[str, type[SequenceModel]] = {
-    cls.kind: cls for cls in (DeepRecursiveFilter, NoDynamics, LSTMBaseline, Monoloco)
+    cls.kind: cls for cls in (DeepRecursiveFilter, NoDynamics, LSTMBaseline, Monoloco, KnownDynamicsFilter)
 }
 
 
@@ -59,7 +60,7 @@ def default_config(kind: str, input_kind: str, out_dim: int, **overrides: Any) -
 
 __all__ = [
     "build_model", "default_config", "MODEL_CLASSES", "INPUT_KINDS", "SequenceModel",
-    "DeepRecursiveFilter", "NoDynamics", "LSTMBaseline", "Monoloco",
+    "DeepRecursiveFilter", "KnownDynamicsFilter", "NoDynamics", "LSTMBaseline", "Monoloco",
     "ImageEncoder", "KeypointEncoder", "ObservationHeads", "TransitionNetwork", "Decoder",
     "gaussian_nll", "centre_keypoints", "relative_laplace_loss",
 ]

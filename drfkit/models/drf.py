@@ -18,6 +18,7 @@ TRANSITION_KINDS = ("lstm", "basis")
 # P / (P + MEMORY_VARIANCE) ~ 1e-4, i.e. unobserved up to a leak far below what training moves
 # (H = [I 0] in the limit). Kept finite so the filter's Cholesky path is the same for every dim.
 MEMORY_VARIANCE = 1e4
+SPECTRAL_SUBSAMPLE = 7  # diagnostics: eigenvalues of every 7th F_t (an eigendecomposition per matrix is the cost)
 
 
 class DeepRecursiveFilter(_EncodedSequenceModel):
@@ -174,6 +175,23 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         posterior = self.head(mean_and_log_variance(trace["z"], trace["p_diag"]))
         prior = self.head(mean_and_log_variance(trace["z_prior"], trace["p_prior"]))
         return posterior, prior
+
+    def filter_diagnostics(self, inputs: torch.Tensor) -> dict[str, torch.Tensor]:
+        """What ``drfkit.methods.diagnostics.filter_trace`` reads of the filter, on the observed dims k:
+        'r' (B, T) mean of r_t; 'gain' (B, T) mean of diag K_t (1 at t = 0); 'prior_err', 'static_err'
+        (B, T-1) ||F_t z_{t-1} - w_t|| and ||z_{t-1} - w_t||; 'spectral_radius' of every
+        ``SPECTRAL_SUBSAMPLE``-th F_t; 'h' the features the decoder reads."""
+        k = self.latent - self.memory_dims
+        w, r = self.observe(inputs)
+        tr = self.filter_steps(w, r, return_gains=True, return_transition=True)
+        z, F = tr["z"], tr["F"]
+        sample = F.flatten(0, 1)[::SPECTRAL_SUBSAMPLE].double()
+        return {"r": r[..., :k].mean(-1),
+                "gain": tr["gains"].diagonal(dim1=-2, dim2=-1)[..., :k].mean(-1),
+                "prior_err": (tr["z_prior"] - w[:, 1:])[..., :k].norm(dim=-1),
+                "static_err": (z[:, :-1] - w[:, 1:])[..., :k].norm(dim=-1),
+                "spectral_radius": torch.linalg.eigvals(sample).abs().amax(-1) if len(sample) else sample.new_empty(0),
+                "h": mean_and_log_variance(z, tr["p_diag"])}
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)

@@ -161,7 +161,10 @@ def check_keypoints(keypoints: torch.Tensor) -> None:
 # let r follow frame quality from a sharp frame (gain near 1) to pure noise (gain near 0); the
 # paper's ELU + 1 head grows only linearly, so reaching r = 1e3 needs weights 1000x the start.
 LOG_R_RANGE = (math.log(1e-3), math.log(1e3))
-NOISE_HEADS = ("elu", "log")
+# r of an observation in the output's own units (cos, sin): from a sharp frame's ~(0.003)^2 to pure noise's
+# spread over the unit circle (the known-dynamics filter's, and the DRF's with readout='identity')
+OUTPUT_LOG_R_RANGE = (math.log(1e-6), math.log(1e1))
+NOISE_HEADS = ("elu", "log", "quality")
 
 
 class ObservationHeads(nn.Module):
@@ -169,22 +172,33 @@ class ObservationHeads(nn.Module):
 
     w = LayerNorm(Linear1(x));
     r = ELU(Linear2(x)) + 1 (+ VARIANCE_FLOOR)              ``noise_head='elu'`` (the paper's), or
-    log r = lo + (hi - lo) * sigmoid(Linear2(x))             ``noise_head='log'``, (lo, hi) = LOG_R_RANGE.
+    log r = lo + (hi - lo) * sigmoid(Linear2(x))             ``noise_head='log'``, (lo, hi) = LOG_R_RANGE, or
+    log r_i = lo + (hi - lo) * sigmoid(a_i + softplus(b_i) s) ``noise_head='quality'``: one learned score
+        s = Linear2(x) (..., 1) per frame, a monotone link to every dim's r (a frame judged worse raises
+        every r_i, so the gain can only fall together on it).
     """
 
-    def __init__(self, in_dim: int, latent: int = 30, noise_head: str = "elu"):
+    def __init__(self, in_dim: int, latent: int = 30, noise_head: str = "elu", normalise: bool = True,
+                 log_r_range: tuple[float, float] = LOG_R_RANGE):
         super().__init__()
         if noise_head not in NOISE_HEADS:
             raise ValueError(f"noise_head must be one of {NOISE_HEADS}, got {noise_head!r}")
-        self.noise_head = noise_head
+        self.noise_head, self.log_r_range = noise_head, log_r_range
         self.linear1 = nn.Linear(in_dim, latent)
-        self.norm = nn.LayerNorm(latent)
-        self.linear2 = nn.Linear(in_dim, latent)
+        # w in the units of the outputs (identity readout) must not be normalised
+        self.norm = nn.LayerNorm(latent) if normalise else nn.Identity()
+        self.linear2 = nn.Linear(in_dim, 1 if noise_head == "quality" else latent)
+        if noise_head == "quality":
+            self.quality_offset = nn.Parameter(torch.zeros(latent))
+            self.quality_slope = nn.Parameter(torch.zeros(latent))
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         pre = self.linear2(x)
-        if self.noise_head == "log":
-            lo, hi = LOG_R_RANGE
+        if self.noise_head == "quality":
+            lo, hi = self.log_r_range
+            r = torch.exp(lo + (hi - lo) * torch.sigmoid(self.quality_offset + F.softplus(self.quality_slope) * pre))
+        elif self.noise_head == "log":
+            lo, hi = self.log_r_range
             r = torch.exp(lo + (hi - lo) * torch.sigmoid(pre))
         else:
             r = positive_elu(pre, VARIANCE_FLOOR)

@@ -36,17 +36,20 @@ from typing import Any
 import torch
 from torch import nn
 
-from drfkit.models.parts import (IMAGE_DOWNSAMPLES, NOISE_HEADS, Decoder, ImageEncoder, KeypointEncoder,
-                                 ObservationHeads, check_dropout_p, mean_and_log_variance)
+from drfkit.models.parts import (IMAGE_DOWNSAMPLES, LOG_R_RANGE, NOISE_HEADS, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, Decoder, ImageEncoder, KeypointEncoder,
+                                 ObservationHeads, check_dropout_p, check_n_samples, mean_and_log_variance)
 
 INPUT_KINDS = ("pendulum", "keypoints")
+# how a belief [mean, log variance] becomes the output: the learned decoder (MC dropout), or read as it is
+# (the first out_dim latent dims are the output's units, so r and q are variances of the output)
+READOUTS = ("decoder", "identity")
 
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
-def make_encoder(input_kind: str, feature_dim: int, image_downsample: str) -> nn.Module:
+def make_encoder(input_kind: str, feature_dim: int, image_downsample: str, channels: int = 12) -> nn.Module:
     if input_kind == "pendulum":
-        return ImageEncoder(feature_dim, downsample=image_downsample)
+        return ImageEncoder(feature_dim, channels=channels, downsample=image_downsample)
     if input_kind == "keypoints":
         return KeypointEncoder(feature_dim)
     raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
@@ -226,12 +229,12 @@ class _EncodedSequenceModel(SequenceModel):
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  feature_dim: int = 64, decoder_hidden: int = 64, dropout_p: float = 0.1,
                  image_downsample: str = "pool", target_offset: float = 0.0, target_scale: float = 1.0,
-                 noise_head: str = "elu", decoder_split: bool = False,
-                 _extra_config: dict[str, Any] | None = None):
+                 noise_head: str = "elu", decoder_split: bool = False, encoder_channels: int = 12,
+                 readout: str = "decoder", _extra_config: dict[str, Any] | None = None):
         if input_kind not in INPUT_KINDS:
             raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
         for name, value in (("out_dim", out_dim), ("latent", latent), ("feature_dim", feature_dim),
-                            ("decoder_hidden", decoder_hidden)):
+                            ("decoder_hidden", decoder_hidden), ("encoder_channels", encoder_channels)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive int, got {value!r}")
         check_dropout_p(dropout_p)
@@ -246,22 +249,59 @@ class _EncodedSequenceModel(SequenceModel):
         if decoder_split and not self.belief_features:
             raise ValueError(f"{type(self).__name__} decodes no [mean, log variance] belief, so its decoder "
                              "cannot be split (decoder_split is for the DRF and no_dynamics)")
+        if readout not in READOUTS:
+            raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
+        if readout == "identity" and (not self.belief_features or decoder_split):
+            raise ValueError("readout='identity' reads the output off the belief's first out_dim dims: for the DRF "
+                             "and no_dynamics, without decoder_split")
         extra = dict(_extra_config or {}) | ({"noise_head": noise_head} if noise_head != "elu" else {}) \
-            | ({"decoder_split": True} if decoder_split else {})
+            | ({"readout": readout} if readout != "decoder" else {}) \
+            | ({"decoder_split": True} if decoder_split else {}) \
+            | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {})
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, latent=latent,
                               feature_dim=feature_dim, decoder_hidden=decoder_hidden,
                               dropout_p=dropout_p, image_downsample=image_downsample,
                               target_offset=float(target_offset), target_scale=float(target_scale),
                               **extra))
-        self.latent = latent
-        self.encoder = make_encoder(input_kind, feature_dim, image_downsample)
-        self.heads = ObservationHeads(feature_dim, latent, noise_head)
+        self.latent, self.readout = latent, readout
+        self.encoder = make_encoder(input_kind, feature_dim, image_downsample, encoder_channels)
+        self.heads = ObservationHeads(feature_dim, latent, noise_head, normalise=readout == "decoder",
+                                      log_r_range=LOG_R_RANGE if readout == "decoder" else OUTPUT_LOG_R_RANGE)
         self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale,
-                               split=latent if decoder_split else None)
+                               split=latent if decoder_split else None) if readout == "decoder" else None
+
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The decoder's (mean, sigma); with ``readout='identity'`` the belief read as it is: mean =
+        its first out_dim dims, sigma = the square root of their variances (+ SIGMA_FLOOR), no dropout
+        (S identical samples: no epistemic spread)."""
+        if self.readout == "decoder":
+            return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p)
+        check_n_samples(n_samples)
+        k = self.out_dim
+        mean = h[..., :k]
+        sigma = torch.exp(0.5 * h[..., self.latent:self.latent + k]) + SIGMA_FLOOR
+        if n_samples:
+            return mean.expand(n_samples, *mean.shape), sigma.expand(n_samples, *sigma.shape)
+        return mean, sigma
+
+    @property
+    def default_dropout_p(self) -> float:
+        return self.decoder.dropout_p if self.decoder is not None else 0.0
 
     def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Encode all B*T frames in one call: w, r (B, T, n)."""
         return self.heads(self.encoder(inputs))
+
+    def observation_output(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, sigma) (B, T, out) decoded from the observation alone, [w_t, log r_t]: what an
+        observation loss fits (``TrainConfig.obs_weight``), so that r_t is trained as the variance of
+        what frame t shows. With the split decoder, that decode's sigma comes from r_t alone."""
+        if not self.belief_features:
+            raise ValueError(f"{type(self).__name__} decodes no [mean, log variance] belief, so it has no "
+                             "observation to decode; set obs_weight = 0 for it")
+        w, r = _EncodedSequenceModel.observe(self, inputs)
+        return self.head(mean_and_log_variance(w, r))
 
 
 class NoDynamics(_EncodedSequenceModel):

@@ -11,17 +11,26 @@ import pandas as pd
 from drfkit.study.registry import STUDIES
 
 # how the figures and tables name and colour a model (presentation, not the paper's numbers)
+# ('physics_bound' is a particle filter on no_dynamics' outputs: a reference, not a bound on any model)
 MODEL_LABELS = {"no_dynamics": "No dynamics", "lstm": "LSTM", "monoloco": "Monoloco", "drf": "DRF (ours)",
-                "physics_bound": "true-physics bound"}
+                "physics_bound": "particle filter on no_dynamics (reference)",
+                "physics_reference": "particle filter on no_dynamics (reference)"}
 MODEL_COLORS = {"no_dynamics": "tab:red", "lstm": "tab:green", "monoloco": "tab:orange", "drf": "tab:blue"}
 
 
+def _model_attribute(model: str, name: str, default: str) -> str:
+    """A model kind's own ``display_label`` / ``display_color`` (a model added in one file brings its own)."""
+    from drfkit.models import MODEL_CLASSES
+
+    return getattr(MODEL_CLASSES.get(model), name, None) or default
+
+
 def label(model: str) -> str:
-    return MODEL_LABELS.get(model, model)
+    return MODEL_LABELS.get(model) or _model_attribute(model, "display_label", model)
 
 
 def color(model: str) -> str:
-    return MODEL_COLORS.get(model, "gray")
+    return MODEL_COLORS.get(model) or _model_attribute(model, "display_color", "gray")
 
 
 def new_figure(ncols: int = 1, nrows: int = 1, width: float = 4.5, height: float = 3.4, **kw):
@@ -97,10 +106,13 @@ def _legend(ax, fontsize: float = 7, extra: list | None = None, **kw) -> None:
 
 def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None = None, ylabel: str = "MAE",
                   level_name: str = "noise", width: float = 6.0, bound: dict | None = None,
-                  bound_label: str = "true-physics bound"):
+                  bound_label: str = "particle filter on no_dynamics (reference)",
+                  references: dict[str, dict] | None = None):
     """Grouped bars of seed-mean MAE (95 % interval as error bar) per noise level and model;
-    the paper's value as a black tick on each bar; ``bound`` (level -> MAE) as a dashed line
-    across each level's group. summary: ``drfkit.study.evaluate.summarise`` by model, noise."""
+    the paper's value as a black tick on each bar; ``bound`` (level -> MAE: a reference, e.g. the
+    particle filter on no_dynamics' outputs) as a dashed line across each level's group, labelled
+    ``bound_label``; ``references`` (label -> {level -> MAE}: estimators that learn nothing, such as the
+    limit on pixels) as grey lines of their own style. summary: ``drfkit.study.evaluate.summarise`` by model, noise."""
     fig, axes = new_figure(1, width=width)
     ax = axes[0, 0]
     study = _study_of(summary, level_name, models)
@@ -120,6 +132,13 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
         if np.isfinite(value):
             ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="black", linestyles="--", lw=1,
                       label=bound_label if j == 0 else None)
+    for (text, values), style in zip((references or {}).items(), (":", "-.", (0, (1, 3)), (0, (5, 2, 1, 2)))):
+        for j, lv in enumerate(levels):  # estimators that learn nothing (e.g. the limit on pixels), per level
+            value = values.get(float(lv), np.nan)
+            if np.isfinite(value):
+                ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="dimgray", linestyles=style, lw=1.2,
+                          label=text if j == 0 or not any(np.isfinite(values.get(float(v), np.nan))
+                                                          for v in levels[:j]) else None)
     _proxy(ax, f"whisker: {CI_TEXT}", marker="|", ms=8, color="black")
     ax.set_xticks(np.arange(len(levels)) + 0.4 - w / 2)
     ax.set_xticklabels([f"{level_name} {lv:g}" for lv in levels])
@@ -132,8 +151,8 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
 def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[str]):
     """MAE per frame (mean over seeds) through a blackout, the blackout frames shaded.
     curves: columns model, seed, frame, mae (``drfkit.study.dynamics.blackout_curves``), and optionally
-    protocol: then one panel per protocol (rows without a protocol, such as the bound's, are drawn
-    in every panel). A model absent from MODEL_COLORS (the bound) is drawn dashed in black."""
+    protocol: then one panel per protocol (rows without a protocol, such as the reference's, are drawn
+    in every panel). A model absent from MODEL_COLORS (the particle-filter reference) is drawn dashed in black."""
     has_protocol = "protocol" in curves
     panels = (list(dict.fromkeys(curves["protocol"].dropna())) if has_protocol else []) or [None]
     fig, axes = new_figure(len(panels), width=6.0 if len(panels) == 1 else 4.2)
@@ -160,7 +179,7 @@ def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[st
 
 def plot_regime(table: pd.DataFrame, models: list[str]):
     """The noise-regime map: one panel per training noise, MAE (seed mean) along the test noise for
-    each model and the true-physics bound (dashed black), the training noise marked; the last
+    each model and the particle-filter reference (dashed black), the training noise marked; the last
     panel the blackout MAE per training noise. table: ``drfkit.study.regime.regime_map``."""
     trains = sorted(table["train_noise"].unique())
     fig, axes = new_figure(len(trains) + 1, width=3.6)
@@ -361,3 +380,81 @@ __all__ = [
     "CI_TEXT", "plot_mae_bars", "plot_blackout", "plot_regime", "plot_picp_mpiw", "plot_sweep", "plot_calibration",
     "plot_training_curves",
 ]
+
+
+GATING_METHODS = {"kalman_gain": ("Kalman-gain gating", "tab:blue", "-"), "random": ("random gating", "tab:gray", "--"),
+                  "oracle": ("oracle (frames of largest true error)", "black", ":")}
+
+
+def _seed_band(frame: pd.DataFrame, value: str) -> pd.DataFrame:
+    """Per val_fraction: mean fraction, mean ``value`` and the half-width of its 95 % t-interval over seeds."""
+    from drfkit.core.metrics import t975
+
+    stats = frame.groupby("val_fraction").agg(fraction=("fraction", "mean"), mean=(value, "mean"), sd=(value, "std"),
+                                              n=(value, "size")).sort_index()
+    stats["half"] = [t975(int(n) - 1) * sd / np.sqrt(n) if n > 1 else np.nan for n, sd in zip(stats["n"], stats["sd"])]
+    return stats
+
+
+def plot_gating_fractions(sweep: pd.DataFrame, groups: list[tuple[str, str]] | None = None):
+    """Threshold-free gating, one column per (study, protocol): top, PICP against the fraction of test
+    frames given MC dropout for the Kalman-gain gate, random gating and an oracle selecting as many
+    frames (those of largest true error; when the sweep has it); bottom, each gate's PICP minus random
+    gating's at the same fraction, paired by seed (what claim C7 judges). Seed means, 95 % t-interval
+    over seeds as a band. sweep: ``drfkit.study.gating_study`` sweep rows (study, protocol, method,
+    seed, val_fraction, fraction, picp)."""
+    groups = groups or list(dict.fromkeys(zip(sweep["study"], sweep["protocol"])))
+    fig, axes = new_figure(len(groups), 2, width=3.8, height=3.0)
+    for col, (study, protocol) in enumerate(groups):
+        part = sweep[(sweep["study"] == study) & (sweep["protocol"] == protocol)]
+        wide = part.pivot_table(index=["seed", "val_fraction"], columns="method", values="picp")
+        for method, (name, colour, ls) in GATING_METHODS.items():
+            rows = part[part["method"] == method]
+            if rows.empty:
+                continue
+            for row, stats in enumerate((_seed_band(rows, "picp"), _seed_band(rows.merge(
+                    (wide[method] - wide["random"]).rename("gain").reset_index(), on=["seed", "val_fraction"]), "gain"))):
+                if row == 1 and method == "random":
+                    continue
+                ax = axes[row, col]
+                x, y, h = 100 * stats["fraction"], 100 * stats["mean"], 100 * np.nan_to_num(stats["half"])
+                ax.plot(x, y, ls=ls, marker="o", ms=2.5, color=colour, label=name)
+                ax.fill_between(x, y - h, y + h, color=colour, alpha=0.15, lw=0)
+        axes[0, col].set(title=f"{study}, {protocol} protocol", ylabel="PICP (%)")
+        axes[1, col].axhline(0, color="gray", lw=0.8)
+        axes[1, col].set(xlabel="frames given MC dropout (%)", ylabel="PICP − random gating's (points)")
+        for ax in axes[:, col]:
+            _proxy(ax, f"band: {CI_TEXT}", marker="s", ms=6, color="lightgray")
+            _legend(ax, fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
+LIMIT_ESTIMATORS = {"pixel_pf": ("particle filter on pixels, level marginalised (the limit)", "black", "-"),
+                    "pixel_pf_known_level": ("particle filter on pixels, level known", "gray", ":"),
+                    "per_frame_bayes": ("per-frame Bayes on pixels", "tab:brown", "--"),
+                    "template_matching": ("per-frame template matching", "tab:olive", "-.")}
+
+
+def plot_pixel_limit(limit: pd.DataFrame, models: dict[str, dict[str, float]] | None = None, width: float = 6.5):
+    """MAE (log scale) per test set of the estimators that know the observation model (``limit``: rows
+    noise, estimator, mae from ``drfkit.study.dynamics.pixel_limit``) and, as markers, learned models'
+    MAE on the same sets (``models``: label or kind -> {set: mae})."""
+    fig, axes = new_figure(1, width=width)
+    ax = axes[0, 0]
+    sets = list(dict.fromkeys(limit["noise"].astype(str)))
+    x = np.arange(len(sets))
+    for name, (text, col, style) in LIMIT_ESTIMATORS.items():
+        rows = limit[limit["estimator"] == name].assign(noise=lambda d: d["noise"].astype(str)).set_index("noise")
+        if len(rows):
+            ax.plot(x, rows["mae"].reindex(sets), style, color=col, marker="o", ms=3, label=text)
+    for i, (kind, values) in enumerate((models or {}).items()):
+        ax.scatter(x + 0.06 * (i - len(models) / 2), [values.get(s, np.nan) for s in sets], color=color(kind),
+                   marker="s", s=22, zorder=3, label=label(kind))
+    ax.set_yscale("log")
+    ax.set_xticks(x)
+    ax.set_xticklabels([s if s in ("clean", "blackout") else f"max noise {s}" for s in sets])
+    ax.set_ylabel("MAE (cos θ, sin θ)")
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    return fig

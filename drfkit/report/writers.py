@@ -51,10 +51,11 @@ HEADLINE_FIGURES = [
     ("pendulum_sweep", "Pendulum: MAE, PICP and NLL along the noise sweep"),
     ("pedestrians_sweep", "Pedestrians: MAE, PICP and NLL along the noise sweep"),
     ("pendulum_book_mae", "Pendulum MAE of the book's training protocol (the DRF's filter checked to filter)"),
-    ("pendulum_blackout", "Pendulum: MAE per frame through 15 pure-noise frames, with the true-physics bound"),
+    ("pendulum_blackout", "Pendulum: MAE per frame through 15 pure-noise frames, with the true-physics reference "
+                          "(a particle filter on no_dynamics' outputs)"),
     ("pendulum_blackout_protocols", "Pendulum blackout under the paper's and the book's protocol, with the "
-                                    "true-physics bound"),
-    ("pendulum_mae_with_bound", "Pendulum MAE (paper's protocol) beside the true-physics bound and the paper's "
+                                    "true-physics reference"),
+    ("pendulum_mae_with_bound", "Pendulum MAE (paper's protocol) beside the true-physics reference and the paper's "
                                 "values (black ticks)"),
     ("pendulum_regime_map", "Noise-regime map: MAE along the test noise for each training noise, and on the blackout"),
 ]
@@ -91,7 +92,7 @@ def recursion_scaling_line(scaling: pd.DataFrame) -> str:
 
 def dynamics_lines(tables: Path) -> list[str]:
     """README lines of the dynamics study (notebook 02): both protocols beside the true-physics
-    bound, and the protocol ablation on validation data; [] when notebook 02 has not written them."""
+    reference, and the protocol ablation on validation data; [] when notebook 02 has not written them."""
     lines: list[str] = []
     protocols, bound = tables / "pendulum_protocols.csv", tables / "pendulum_physics_bound.csv"
     if protocols.exists() and bound.exists():
@@ -100,8 +101,9 @@ def dynamics_lines(tables: Path) -> list[str]:
         mean = pt.groupby(["protocol", "model"], sort=False).mean(numeric_only=True)
         b = pd.read_csv(bound).groupby("noise")["mae"].mean()
         lines += ["Does the filter filter? Test MAE (MC dropout mean, seed means) of each protocol's models beside "
-                  "the true-physics bound (a particle filter with the generator's equations on no_dynamics' "
-                  "per-frame estimates: knowledge no learned model has), and the DRF's mechanism checks "
+                  "the true-physics reference (a particle filter with the generator's equations on no_dynamics' "
+                  "per-frame estimates: knowledge no learned model has; a comparison, not a bound, since a DRF "
+                  "can do better than it), and the DRF's mechanism checks "
                   "(`tables/pendulum_protocols.csv`, `tables/pendulum_physics_bound.csv`, notebook 02):", "",
                   "| protocol | model | " + " | ".join(c.replace("mae_", "MAE ") for c in mae_cols)
                   + " | rank corr(r, noise) | gain pure / clean | ‖Fz − w‖ / ‖z − w‖ |",
@@ -111,14 +113,14 @@ def dynamics_lines(tables: Path) -> list[str]:
             lines.append(f"| {protocol} | {label(model)} | " + " | ".join(fmt(r[c]) for c in mae_cols) + " | "
                          + " | ".join(fmt(r.get(c), 2) for c in ("r_noise_spearman", "gain_ratio_blackout", "prior_ratio"))
                          + " |")
-        # each protocol's bound on its own no_dynamics when notebook 02 wrote them (like for like), else the
+        # each protocol's reference on its own no_dynamics when notebook 02 wrote them (like for like), else the
         # paper protocol's; the noise column holds levels and 'blackout': named as the protocol table's columns
         per_protocol = tables / "pendulum_physics_bound_protocols.csv"
         bounds = ({name: g.groupby("noise")["mae"].mean() for name, g in
                    pd.read_csv(per_protocol).groupby("protocol", sort=False)} if per_protocol.exists() else {"—": b})
         for name, bp in bounds.items():
             bound_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in bp.items()}
-            lines.append(f"| {name} | true-physics bound on its no_dynamics | "
+            lines.append(f"| {name} | true-physics reference on its no_dynamics | "
                          + " | ".join(fmt(bound_of.get(c)) for c in mae_cols) + " | | | |")
         lines.append("")
     ablation = tables / "pendulum_ablation.csv"
@@ -142,8 +144,9 @@ def dynamics_lines(tables: Path) -> list[str]:
         lines += ["Noise-regime map (the book's protocol trained at each max noise on the ablation's budget; MAE on "
                   "the map's own **test** split, seed means; `tables/pendulum_regime_summary.csv`, "
                   "`python -m drfkit regime`): DRF against no_dynamics (< 1: the filter helps) and against the "
-                  "true-physics bound:", "",
-                  "| trained at | test | DRF | LSTM | no_dynamics | bound | DRF / no_dynamics | DRF / bound |",
+                  "true-physics reference (the particle filter on no_dynamics' outputs; below 1 the DRF does "
+                  "better than it):", "",
+                  "| trained at | test | DRF | LSTM | no_dynamics | reference | DRF / no_dynamics | DRF / reference |",
                   "|---|---|---|---|---|---|---|---|"]
         for r in rg.itertuples():
             lines.append(f"| {r.train_noise:g} | {r.test} | {r.drf:.4f} | {r.lstm:.4f} | {r.no_dynamics:.4f} | "
@@ -159,18 +162,14 @@ README_FIGURES = ("pendulum_mae_with_bound", "pendulum_blackout_protocols", "ped
 def claims_summary_table(claims_csv: Path) -> list[str]:
     """The README's short claims table from ``claims.csv``: one row per claim (id, claim, the paper's
     number) and a verdict per protocol when there is more than one ("—" where a claim is judged
-    under one protocol only); report.md and claims.md hold ours and the rules."""
-    from drfkit.study.claims import CLAIM_EVIDENCE, PEDESTRIAN_CLAIMS, evidence_links, read_claims
-    from drfkit.util.paths import REPO_ROOT
+    under one protocol only). Ours, the rules and each claim's evidence (notebook section, tables,
+    figures) are claims.md's, which the README links once instead of repeating them."""
+    from drfkit.study.claims import PEDESTRIAN_CLAIMS, read_claims
 
     c = read_claims(claims_csv)
-    try:
-        prefix = Path(claims_csv).resolve().parent.relative_to(REPO_ROOT).as_posix() + "/"
-    except ValueError:  # a profile outside the repository: links relative to its results folder
-        prefix = ""
     protocols = list(dict.fromkeys(c["protocol"]))
     verdict_cols = [f"verdict, {p} protocol" for p in protocols] if len(protocols) > 1 else ["verdict"]
-    head = ["id", "claim", "paper"] + verdict_cols + ["judged in"]
+    head = ["id", "claim", "paper"] + verdict_cols
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for cid, rows in c.groupby("id", sort=False):
         by_protocol = dict(zip(rows["protocol"], rows["verdict"]))
@@ -178,53 +177,71 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
         sim = " (simulated source)" if cid in PEDESTRIAN_CLAIMS else ""
         verdicts = [f"**{by_protocol[p]}**{sim}" if p in by_protocol else "—" for p in protocols]
         cells = [cid, first["claim"], first["paper"]] + verdicts
-        lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " | "
-                     + (evidence_links(cid, prefix) if cid in CLAIM_EVIDENCE else "") + " |")
+        lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " |")
     if len(protocols) > 1:
         lines += ["", "— : the claim is not judged under that protocol (its study's models were not trained "
                       "under it in this profile)."]
     return lines
 
 
+def figure_lines(profile: str, names, command: str, prefix: str) -> list[str]:
+    """An image and its caption for each of ``names`` (HEADLINE_FIGURES) the profile has, linked as
+    ``<prefix>figures/<name>.png``: ``prefix`` is results/<profile>/ as seen from the page."""
+    from drfkit.util.paths import results_dir
+
+    captions = dict(HEADLINE_FIGURES)
+    lines = []
+    for name in names:
+        if (results_dir(profile) / "figures" / f"{name}.png").exists():
+            lines += [f"![{captions[name]}]({prefix}figures/{name}.png)", f"*{captions[name]}* (`{command}`)", ""]
+    return lines
+
+
 def readme_section(profile: str, command: str) -> str:
-    """The README's short results section: where the run came from, the verdicts, the two
-    headline figures and a link to ``results/<profile>/report.md`` (``results_section``)."""
-    from drfkit.util.paths import REPO_ROOT, results_dir
+    """The README's short results section: where the run came from, the verdicts, links to
+    ``results/<profile>/claims.md`` (ours, rules, evidence) and ``report.md`` (every number), and
+    the headline figures. Links are relative to the repository root, where the README is."""
+    from drfkit.util.paths import results_dir
 
     root = results_dir(profile)
     if not (root / "claims.csv").exists():
         return f"No results for profile `{profile}` yet: run `{command}`.\n"
-    full = results_section(profile, command, link_figures=True)
+    prefix = f"results/{profile}/"
+    full = results_section(profile, command, link_figures=False)
     lines = [full.split("\n", 2)[0], "",  # the provenance line
-             f"Every number, the rules behind each verdict, the training cost, the speed measurements and the "
-             f"dynamics tables: [results/{profile}/report.md](results/{profile}/report.md) (written with this "
-             f"section by `python -m drfkit report --profiles {profile}`).", ""]
+             f"Our numbers, the rule behind each verdict and where each claim is judged (notebook section, "
+             f"tables, figures): [{prefix}claims.md]({prefix}claims.md). Every number, the training cost, the "
+             f"speed measurements and the dynamics tables: [{prefix}report.md]({prefix}report.md) (both "
+             f"regenerated with this section by `python -m drfkit report --profiles {profile}`).", ""]
     lines += claims_summary_table(root / "claims.csv") + [""]
-    captions = dict(HEADLINE_FIGURES)
-    for name in README_FIGURES:
-        png, caption = root / "figures" / f"{name}.png", captions[name]
-        if png.exists():
-            lines += [f"![{caption}]({png.relative_to(REPO_ROOT)})", f"*{caption}* (`{command}`)", ""]
+    lines += figure_lines(profile, README_FIGURES, command, prefix)
     return "\n".join(lines)
 
 
+def report_text(profile: str, command: str) -> str:
+    """``results/<profile>/report.md``'s text: the whole generated results section, figures included,
+    its links relative to results/<profile>/ (where the report is)."""
+    body = results_section(profile, command, link_figures=True)
+    return (f"# Results of profile `{profile}`\n\nGenerated by `python -m drfkit report --profiles {profile}`; "
+            f"never edit by hand.\n\n{body}\n")
+
+
 def write_report(profile: str, command: str) -> Path:
-    """``results/<profile>/report.md``: the whole generated results section, figures included."""
+    """Write ``report_text`` to ``results/<profile>/report.md``."""
     from drfkit.util.io import atomic_write_text
     from drfkit.util.paths import results_dir
 
     path = results_dir(profile) / "report.md"
-    body = results_section(profile, command, link_figures=True).replace("](results/", "](../../results/")
-    atomic_write_text(path, f"# Results of profile `{profile}`\n\nGenerated by `python -m drfkit report "
-                            f"--profiles {profile}`; never edit by hand.\n\n{body}\n")
+    atomic_write_text(path, report_text(profile, command))
     return path
 
 
 def results_section(profile: str, command: str, link_figures: bool) -> str:
-    """The whole results section for ``profile``, built from its claims.md and manifest."""
+    """The whole results section for ``profile``, built from its claims.md and manifest; its links
+    (claims.md's, the figures') are relative to results/<profile>/."""
     import json
 
-    from drfkit.util.paths import REPO_ROOT, results_dir
+    from drfkit.util.paths import results_dir
 
     root = results_dir(profile)
     claims = root / "claims.md"
@@ -296,10 +313,7 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     if scaling.exists():
         lines += [recursion_scaling_line(pd.read_csv(scaling)), ""]
     if link_figures:
-        for name, caption in HEADLINE_FIGURES:
-            png = root / "figures" / f"{name}.png"
-            if png.exists():
-                lines += [f"![{caption}]({png.relative_to(REPO_ROOT)})", f"*{caption}* (`{command}`)", ""]
+        lines += figure_lines(profile, [name for name, _ in HEADLINE_FIGURES], command, "")
     return "\n".join(lines)
 
 

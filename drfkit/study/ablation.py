@@ -26,19 +26,22 @@ import pandas as pd
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, fresh_noise_seed, load_pendulum, redraw_noise,
-                                  with_blackout, with_random_blackouts)
+from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, fresh_noise_seed, generate_pendulum, load_pendulum,
+                                  redraw_noise, with_blackout, with_random_blackouts)
 from drfkit.methods.diagnostics import blackout_summary, diagnose
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, TRAINING_BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
 from drfkit.util.io import atomic_write_json, param_hash
 from drfkit.util.paths import results_root
 from drfkit.methods.protocols import ABLATION_BUDGETS as BUDGETS
-from drfkit.methods.protocols import VARIANTS, summarise_ablation, variant_spec
+from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, VARIANTS, summarise_ablation, variant_spec
 from drfkit.methods.train import SequenceData, TrainConfig, load_checkpoint, train_model
 
 DATA_SEED = 1000  # the profiles' pend_data_seed: train = seed, val = seed + 1 (test, seed + 2, is never read)
 
 EVAL_LEVELS = (0.5, 0.75, 1.0)
+ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS}
+# fresh trajectories (the encoder probe): seeds far from every split's (data seed + 0, 1, 2)
+FRESH_MOTION_SEED = 10_000_000
 
 
 def _split(cache: Path, budget: dict, split: str, level: float) -> dict:
@@ -83,11 +86,18 @@ def train_variant(name: str, seed: int, budget_name: str = "small", out: str | P
     config = {"kind": spec["kind"], "input_kind": "pendulum", "out_dim": 2, **spec["model"]}
     cfg = train_config(budget, spec["train"], seed)
     fresh = None
-    if spec["train"].get("fresh_noise"):
+    if spec["train"].get("fresh_motion"):
+        def fresh(epoch: int) -> SequenceData:  # new trajectories (and their noise) every epoch: unlimited frames
+            return _as_data(generate_pendulum(budget["train_sequences"], budget["seq_len"], noise,
+                                              FRESH_MOTION_SEED + fresh_noise_seed(DATA_SEED, epoch)))
+    elif spec["train"].get("fresh_noise"):
         def fresh(epoch: int) -> SequenceData:  # the same clean frames, new noise (and blackouts) per epoch
             return _as_data(redraw_noise(clean_train, noise, fresh_noise_seed(DATA_SEED, epoch), spec["blackouts"]))
     res = train_model(config, _as_data(train), _as_data(val), cfg, folder / "models" / f"{name}-seed{seed}-{key}",
-                      data_key=key, progress=progress, fresh_train=fresh)
+                      data_key=key, progress=progress, fresh_train=fresh,
+                      recipe={"variant": name, "budget": budget_name, "train_max_noise": spec["train_max_noise"],
+                              "blackouts": spec["blackouts"], "fresh_noise": bool(spec["train"].get("fresh_noise")),
+                              "fresh_motion": bool(spec["train"].get("fresh_motion"))})
     return res, key
 
 
@@ -95,7 +105,7 @@ def train_config(budget: dict, overrides: dict, seed: int) -> TrainConfig:
     """The budget's schedule with a variant's ``train`` overrides (``fresh_noise`` is the data's
     business; ``mse_warmup: "half"`` means half the budget's epochs)."""
     fields = {"epochs": budget["epochs"], "lr": budget["lr"], "batch_size": budget["batch_size"]}
-    fields |= {k: v for k, v in overrides.items() if k != "fresh_noise"}
+    fields |= {k: v for k, v in overrides.items() if k not in ("fresh_noise", "fresh_motion")}
     if fields.get("mse_warmup") == "half":
         fields["mse_warmup"] = fields["epochs"] // 2
     return TrainConfig(seed=seed, **fields)
@@ -178,23 +188,27 @@ def summary_markdown(summary: pd.DataFrame) -> str:
 MECHANISM_TARGETS = ("r_follows_noise", "gain_drops", "f_predicts", "coasts")
 
 
-def mechanism_targets(summary: pd.DataFrame, min_seeds: int = 2) -> pd.DataFrame:
+def mechanism_targets(summary: pd.DataFrame, min_seeds: int = 2, kinds: tuple[str, ...] = ("drf",),
+                      pure_noise_free: bool = False) -> pd.DataFrame:
     """Which of the filter's targets each DRF variant of a summary (``summarise_ablation``) meets on
     validation, by the thresholds of claims F1 and F2: rank correlation of r with the noise, gain on
     pure noise against clean frames, one-step prediction ratio, blackout MAE. Only variants trained at
     the paper's max noise 0.5 (a variant trained on other noise changes what "out of distribution"
     means) with at least ``min_seeds`` seeds. Sorted best first: most targets met, then the lowest
-    MAE at 0.75 -- the rule that chose the book's DRF (``protocols.PROTOCOLS['book']``)."""
+    MAE at 0.75 -- the rule that chose the book's DRF (``protocols.PROTOCOLS['book']``). ``kinds``: the
+    filters judged; ``pure_noise_free``: only variants trained without pure-noise frames (no training
+    blackouts), for which the blackout is out of distribution (the third round's rule)."""
     from drfkit.study.claims import F1_GAIN_RATIO, F1_PREDICTION_RATIO, F1_RANK_CORRELATION, F2_BLACKOUT_MAE
 
-    rows = summary[(summary["kind"] == "drf") & (summary["n_seeds"] >= min_seeds)]
-    rows = rows[[variant_spec(v)["train_max_noise"] == 0.5 for v in rows["variant"]]].copy()
+    rows = summary[summary["kind"].isin(kinds) & (summary["n_seeds"] >= min_seeds)]
+    rows = rows[[variant_spec(v)["train_max_noise"] == 0.5 and not (pure_noise_free and variant_spec(v)["blackouts"])
+                 for v in rows["variant"]]].copy()
     rows["r_follows_noise"] = rows["r_noise_spearman"] >= F1_RANK_CORRELATION
     rows["gain_drops"] = rows["gain_ratio_blackout"] <= F1_GAIN_RATIO
     rows["f_predicts"] = rows["prior_ratio"] < F1_PREDICTION_RATIO
     rows["coasts"] = rows["mae_blackout"] <= F2_BLACKOUT_MAE
     rows["targets_met"] = rows[list(MECHANISM_TARGETS)].sum(axis=1)
-    cols = ["variant", "n_seeds", *MECHANISM_TARGETS, "targets_met", "mae_0.5", "mae_0.75", "mae_blackout"]
+    cols = ["variant", "kind", "n_seeds", *MECHANISM_TARGETS, "targets_met", "mae_0.5", "mae_0.75", "mae_blackout"]
     return rows.sort_values(["targets_met", "mae_0.75"], ascending=[False, True])[cols].reset_index(drop=True)
 
 
@@ -233,9 +247,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="folder (default results/ablation)")
     parser.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
     parser.add_argument("--markdown", action="store_true", help="with --summary: as the markdown table docs/ quote")
+    parser.add_argument("--round", type=int, choices=sorted(ROUNDS), help="with --summary: that round's variants only")
     args = parser.parse_args(argv)
     if args.summary:
-        summary = summarise_ablation(ablation_table(args.budget, args.out))
+        table = ablation_table(args.budget, args.out)
+        if args.round is not None and len(table):
+            table = table[table["variant"].isin(list(ROUNDS[args.round]))]
+        summary = summarise_ablation(table)
         print(summary_markdown(summary) if args.markdown else summary.to_string(index=False))
         return 0
     for name in args.variants:

@@ -58,7 +58,14 @@ class Study:
         """``P.<section>.<key>``: a value of the study's section of the typed profile."""
         return getattr(getattr(P, self.section), key)
 
-    def models(self, P) -> list[str]:
+    def models(self, P, protocol: str = "paper") -> list[str]:
+        """The models a profile trains under ``protocol``: the section's ``models_key`` list, or, for
+        another protocol whose own profile section names ``models`` (the pendulum's ``book.models``),
+        that list (a protocol may add a model the paper does not have, e.g. the known-dynamics filter)."""
+        if protocol != "paper":
+            own = getattr(getattr(getattr(P, self.section), protocol, None), "models", None)
+            if own is not None:
+                return list(own)
         return list(self._get(P, self.models_key))
 
     def train_level(self, P) -> float:

@@ -77,12 +77,17 @@ def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = ME
     """Mean, 95 % t-interval half-width and seed count of ``values`` grouped ``by``.
 
     Output columns: ``by...``, ``n_seeds``, and for each value ``<v>``, ``<v>_ci`` (half-width),
-    ``<v>_lo``, ``<v>_hi``.
+    ``<v>_lo``, ``<v>_hi``. A group that holds a seed twice (with a ``seed`` column) is refused: its
+    rows are not independent, and counting them would narrow the interval (pseudo-replication).
     """
     by, values = list(by), [v for v in values if v in frame.columns]
     rows = []
     for key, group in frame.groupby(by, sort=False):
         key = key if isinstance(key, tuple) else (key,)
+        if "seed" in group and group["seed"].duplicated().any():
+            raise ValueError(f"summarise: the group {dict(zip(by, key))} holds seed(s) "
+                             f"{sorted(group.loc[group['seed'].duplicated(), 'seed'].unique())} more than once; "
+                             "each seed must be counted once (a level or model evaluated twice?)")
         row: dict[str, Any] = dict(zip(by, key))
         row["n_seeds"] = len(group)
         for v in values:
@@ -101,15 +106,19 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     """Every trained (model, seed) of ``study`` at every test noise level and dropout rate.
 
     Returns one row per (model, seed, noise, dropout_p) with all ``METRICS`` (PICP as a
-    fraction). ``dropout_p = None`` means each model's own training rate. Test sets are built
+    fraction). ``dropout_p = None`` means each model's own training rate. A level named twice is
+    refused (its rows would count every seed twice). Test sets are built
     by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
     """
     from drfkit.study import studies
 
+    noise_levels = [float(v) for v in noise_levels]
+    if len(set(noise_levels)) != len(noise_levels):  # each seed would be counted twice there
+        raise ValueError(f"evaluate_study: the test levels {noise_levels} name a level twice; pass each level once "
+                         f"(e.g. sorted({{train_level, *eval_levels}}))")
     models = models if models is not None else studies.trained_models(P, study)
     device = studies.pick_device(P.device)
     rows = []
-    noise_levels = list(noise_levels)
     for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
         data = studies.study_data(P, study, "test", noise)
         for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed

@@ -33,10 +33,12 @@ _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
-               "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
+               "pend_book_models", "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
 _DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "ablation_round2_budget",
              "ablation_round2_variants", "ablation_round2_seeds", "regime_train_noise",
-             "regime_seeds", "regime_test_sequences"]
+             "regime_seeds", "regime_test_sequences", "ablation_round3_budget", "ablation_round3_variants",
+             "ablation_round3_seeds",
+             "limit_sequences", "limit_particles"]
 _PED_DATA = ["ped_source", "nuscenes_root", "nuscenes_version", "pifpaf_predictions", "ped_n_scenes",
              "ped_frames_per_scene", "ped_train_p", "ped_eval_p", "ped_sweep_p", "ped_seq_len",
              "ped_data_seed", "sim_detector"]
@@ -52,7 +54,8 @@ NOTEBOOKS: dict[str, list[str]] = {
     "01_pendulum_training": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC,
     "02_pendulum_dynamics": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
     "03_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
-    "04_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC,
+    "04_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC
+                               + ["limit_sequences", "limit_particles"],
     "05_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
     "06_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }
@@ -240,20 +243,48 @@ def write_profile(path: str | Path, flat: dict[str, Any]) -> Path:
     return path
 
 
-def load_profile(profile: str | Path) -> dict[str, Any]:
-    """Read ``params/<profile>.yaml`` (or a path): its sections checked against ``SCHEMA``,
-    returned flat, ``{notebook name: value}``."""
+BASE_KEY = "base"  # a profile's top-level key naming the profile it overrides
+
+
+def _profile_path(profile: str | Path, relative_to: Path | None = None) -> Path:
+    """``params/<name>.yaml`` for a name, else the YAML path itself (a relative one taken from
+    ``relative_to``: the folder of the profile that names it as its base)."""
     path = Path(profile)
     if path.suffix not in (".yaml", ".yml"):
-        path = PARAMS_DIR / f"{profile}.yaml"
+        return PARAMS_DIR / f"{profile}.yaml"
+    return relative_to / path if relative_to is not None and not path.is_absolute() else path
+
+
+def load_profile(profile: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """Read ``params/<profile>.yaml`` (or a path): its sections checked against ``SCHEMA``,
+    returned flat, ``{notebook name: value}``.
+
+    A profile may name a base (``base: quick``, or a YAML path relative to its own folder) and hold
+    only what it changes: its keys replace the base's (a list or a mapping value as a whole), after
+    the same checks of each file's keys; the checks of every value against the notebooks that read
+    it (``notebook_params``) see the merged profile. Unless it sets ``profile``, it is named after
+    its file, so its results never land in the base's folder."""
+    path = _profile_path(profile, _chain[-1].parent if _chain else None)
     if not path.is_file():
         known = sorted(p.stem for p in PARAMS_DIR.glob("*.yaml"))
-        raise ParameterError(f"parameter file {path} does not exist; known profiles: {known}")
+        named = f" (the base of {_chain[-1]})" if _chain else ""
+        raise ParameterError(f"parameter file {path}{named} does not exist; known profiles: {known}")
     with open(path) as fh:
         values = yaml.safe_load(fh) or {}
     if not isinstance(values, dict):
         raise ParameterError(f"{path}: expected a mapping of parameter: value")
-    return flatten_profile(values, str(path))
+    base = values.pop(BASE_KEY, None)
+    flat = flatten_profile(values, str(path))
+    if base is None:
+        return flat
+    if not isinstance(base, str) or not base.strip():
+        raise ParameterError(f"{path}: '{BASE_KEY}' names the profile this one overrides: a name in params/ "
+                             f"(quick, paper) or a YAML path; got {base!r}")
+    here = path.resolve()
+    if here in _chain or _profile_path(base, path.parent).resolve() in (*_chain, here):
+        cycle = " -> ".join(str(p) for p in (*_chain, here, _profile_path(base, path.parent).resolve()))
+        raise ParameterError(f"{path}: the profiles' bases form a circle: {cycle}")
+    return load_profile(base, (*_chain, here)) | {"profile": path.stem} | flat
 
 
 def parse_overrides(items: list[str] | None) -> dict:

@@ -81,7 +81,7 @@ def recipe_fields(spec: dict[str, Any]) -> dict[str, Any]:
     """The ``TrainConfig`` fields of a variant's training recipe (objective, beta, schedule, windows,
     selection, prior weight) at paper scale: the profile's schedule keys and the data's business
     (``fresh_noise``) left out."""
-    return {k: v for k, v in spec["train"].items() if k not in PROFILE_SCHEDULE and k != "fresh_noise"}
+    return {k: v for k, v in spec["train"].items() if k not in PROFILE_SCHEDULE and k not in ("fresh_noise", "fresh_motion")}
 
 
 def pendulum_train_config(P, kind: str, seed: int, protocol: str = "paper") -> TrainConfig:
@@ -116,7 +116,7 @@ def pendulum_fresh_training(P, protocol: str, noise: Noise | float | None = None
 
 
 PENDULUM = Study(
-    "pendulum", "pendulum", 2, ("drf", "no_dynamics", "lstm"), section="pendulum",
+    "pendulum", "pendulum", 2, ("drf", "no_dynamics", "lstm", "known_dynamics"), section="pendulum",
     models_key="models", train_level_key="train_max_noise", eval_levels_key="eval_max_noise",
     sweep_key="sweep_max_noise", training_notebook="01_pendulum_training", noise_kind="rkn_uniform",
     protocols_key="protocols",

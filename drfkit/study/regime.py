@@ -1,5 +1,5 @@
 """The noise-regime map: where along the noise axis does a learned filter help, and by how much
-against the true-physics bound?
+against the true-physics reference?
 
 The book's protocol of each model kind (``drfkit.methods.protocols.regime_variant``) is trained at
 several max noise levels on the second ablation round's budget (``drfkit.study.ablation.train_variant``: the same
@@ -10,7 +10,7 @@ pure noise). MAE is the MC-dropout mean's, as everywhere in the book. Beside eve
 noise, the true-physics particle filter (``drfkit.methods.oracle.bound_on``) on that noise's
 no_dynamics estimates, calibrated on the validation split at its training noise.
 
-One JSON row file per (variant, seed) and per bound, under ``<out>/<budget>/regime/``, keyed
+One JSON row file per (variant, seed) and per reference, under ``<out>/<budget>/regime/``, keyed
 by the run and every evaluation setting: a clean clone reads them without the models, and a
 changed setting retrains (or reloads) only what it needs.
 
@@ -101,7 +101,7 @@ def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, l
 
 def bound_row(train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
               n_particles: int, cache: Path | None = None, progress: bool = False) -> dict[str, Any]:
-    """The true-physics bound on the no_dynamics of ``train_noise`` (σ scale and outlier weight
+    """The true-physics reference (a particle filter) on the no_dynamics of ``train_noise`` (σ scale and outlier weight
     chosen on the validation split at that noise), at every test level and on the blackout."""
     name = regime_variant("no_dynamics", train_noise)
     budget, _, folder, run_key = ablation._run(name, seed, budget_name, out)
@@ -147,7 +147,8 @@ def regime_map(train_noises: Iterable[float], seeds: Iterable[int], budget_name:
 
 def regime_summary(table: pd.DataFrame) -> pd.DataFrame:
     """Seed-mean MAE per (train_noise, test) with a column per model, and two ratios: the DRF
-    over no_dynamics (< 1: the filter helps) and over the bound (how far from the limit)."""
+    over no_dynamics (< 1: the filter helps) and over the particle-filter reference (< 1: the DRF does
+    better than filtering no_dynamics' outputs with the true physics; the column keeps the name 'bound')."""
     wide = table.pivot_table(index=["train_noise", "test"], columns="model", values="mae", aggfunc="mean",
                              sort=False)
     wide["drf_over_no_dynamics"] = wide["drf"] / wide["no_dynamics"]

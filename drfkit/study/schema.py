@@ -103,6 +103,10 @@ SCHEMA = Section("", {
                           lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
                           "the training protocols notebooks 01 and 02 train and evaluate (drfkit.methods.protocols)"),
         "book": Section("book_", {
+            "models": Spec(list[str], "a non-empty list of model kinds the book's protocol names "
+                           "(drfkit.methods.protocols.PROTOCOLS['book'])",
+                           lambda v: len(v) > 0 and len(set(v)) == len(v) and set(v) <= set(PROTOCOLS["book"]),
+                           "the models trained under the book's protocol (it adds the known-dynamics filter)"),
             "epochs": Spec(int, *_POSITIVE, "epochs of the book's protocol"),
             "batch_size": Spec(int, *_POSITIVE),
             "lr": Spec(float, *_RATE),
@@ -112,7 +116,7 @@ SCHEMA = Section("", {
     }, "the noisy pendulum: data, then training under the paper's protocol"),
     "dynamics": Section("", {
         "bound_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
-                                "particles of the true-physics bound (drfkit.methods.oracle)"),
+                                "particles of the true-physics reference (drfkit.methods.oracle)"),
         "ablation": Section("ablation_", {
             "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
             "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
@@ -123,6 +127,20 @@ SCHEMA = Section("", {
                 "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
                 "seeds": Spec(list[int], _SEEDS, _seeds),
             }),
+            "round3": Section("round3_", {
+                "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS,
+                               "budget of the third round: competence, trained without pure-noise frames "
+                               "(drfkit.methods.protocols.ROUND3_VARIANTS)"),
+                "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),
+                "seeds": Spec(list[int], _SEEDS, _seeds),
+            }),
+        }),
+        "limit": Section("limit_", {
+            "sequences": Spec(int, *_POSITIVE, "test sequences the limit on pixels is computed on "
+                                               "(drfkit.methods.pixel_bayes; the first of the test split)"),
+            "particles": Spec(list[int], "a non-empty list of increasing integers >= 10",
+                              lambda v: len(v) > 0 and all(x >= 10 for x in v) and list(v) == sorted(set(v)),
+                              "particle counts of the pixel filter; the largest gives the table, all show convergence"),
         }),
         "regime": Section("regime_", {
             "train_noise": Spec(list[float], "a non-empty list of distinct numbers in [0, 1] that holds 0.5",

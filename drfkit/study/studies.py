@@ -22,7 +22,8 @@ from drfkit.data.noise import Noise
 from drfkit.util.io import atomic_write_csv, param_hash
 from drfkit.util.paths import models_dir, tables_dir
 from drfkit.util.device import pick_device
-from drfkit.methods.train import SequenceData, TrainConfig, TrainResult, history_frame, naming_fields, train_model
+from drfkit.methods.train import (SequenceData, TrainConfig, TrainResult, finished_run, history_frame, naming_fields,
+                                  train_model)
 # each study's data, as notebooks ask for it
 from drfkit.study.pedestrian_runs import pedestrian_data, pedestrian_records, pedestrian_split, target_statistics
 from drfkit.study.pendulum_runs import SPLIT_SEED_OFFSET, pendulum_data, pendulum_split
@@ -47,8 +48,8 @@ def study_data_key(P, study: str, protocol: str = "paper") -> dict[str, Any]:
     return entry.data_key(P, protocol, entry.noise_kind)
 
 
-def study_models(P, study: str) -> list[str]:
-    return registry.study(study).models(P)
+def study_models(P, study: str, protocol: str = "paper") -> list[str]:
+    return registry.study(study).models(P, protocol)
 
 
 def model_config(study: str, kind: str, P=None, protocol: str = "paper", options: dict[str, Any] | None = None
@@ -101,44 +102,58 @@ def curves_name(study: str, protocol: str = "paper") -> str:
 
 
 def train_models(P, study: str, progress: bool = True, kinds: list[str] | None = None,
-                 seeds: list[int] | None = None, protocol: str = "paper", options: dict[str, Any] | None = None
-                 ) -> dict[tuple[str, int], TrainResult]:
+                 seeds: list[int] | None = None, protocol: str = "paper", options: dict[str, Any] | None = None,
+                 write_curves: bool = True) -> dict[tuple[str, int], TrainResult]:
     """Train (or load from cache / resume) every model of ``study`` for every seed.
 
     Writes ``tables/<curves_name>.csv`` with one row per model, seed and epoch
-    (only when the whole set is trained; ``kinds`` / ``seeds`` pick a subset, as the
+    (only when the whole set is trained and ``write_curves``: one writer per table, the notebook that
+    trains the runs and ``python -m drfkit train``; ``kinds`` / ``seeds`` pick a subset, as the
     command line does to spread training over processes or sessions). ``options``: model
     options over the protocol's (``model_config``), for a diagnostic variant of ``kinds``.
     """
     device = pick_device(P.device)
-    train, val = study_data(P, study, "train", None, protocol), study_data(P, study, "val", None, protocol)
-    data_key = param_hash(study_data_key(P, study, protocol))
-    fresh = fresh_training(P, study, protocol)
+    key = study_data_key(P, study, protocol)
+    data_key = param_hash(key)
+    recipe = {"study": study, "protocol": protocol, **key}
+    data: dict[str, Any] = {}
+
+    def splits():  # generated only when a run must train: a finished run loads from its files alone
+        if not data:
+            data.update(train=study_data(P, study, "train", None, protocol), val=study_data(P, study, "val", None, protocol),
+                        fresh=fresh_training(P, study, protocol))
+        return data
+
     results, curves = {}, []
-    for kind in kinds or study_models(P, study):
+    for kind in kinds or study_models(P, study, protocol):
         for seed in seeds or P.seeds:
-            res = train_model(model_config(study, kind, P, protocol, options), train, val,
-                              train_config(P, study, kind, seed, protocol),
-                              checkpoint_stem(P, study, kind, seed, protocol, options), data_key=data_key, device=device,
-                              progress=progress, fresh_train=fresh)
+            config, cfg = model_config(study, kind, P, protocol, options), train_config(P, study, kind, seed, protocol)
+            stem = checkpoint_stem(P, study, kind, seed, protocol, options)
+            res = finished_run(config, cfg, stem, data_key=data_key)
+            if res is None:
+                d = splits()
+                res = train_model(config, d["train"], d["val"], cfg, stem, data_key=data_key, device=device,
+                                  progress=progress, fresh_train=d["fresh"], recipe=recipe)
             results[(kind, seed)] = res
             curve = history_frame(res.history)
             curve.insert(0, "seed", seed)
             curve.insert(0, "model", kind)
             curves.append(curve)
-    if kinds is None and seeds is None and not options:
+    if write_curves and kinds is None and seeds is None and not options:
         atomic_write_csv(tables_dir(P.profile) / f"{curves_name(study, protocol)}.csv",
                          pd.concat(curves, ignore_index=True))
     return results
 
 
-def trained_models(P, study: str, progress: bool = False, protocol: str = "paper") -> dict[tuple[str, int], Any]:
-    """The best checkpoint of every (model, seed), loaded in eval mode (trains what is missing)."""
+def trained_models(P, study: str, progress: bool = False, protocol: str = "paper",
+                   write_curves: bool = False) -> dict[tuple[str, int], Any]:
+    """The best checkpoint of every (model, seed), loaded in eval mode (trains what is missing); the
+    training curves table only with ``write_curves`` (the notebook that trains these runs)."""
     from drfkit.methods.train import load_checkpoint
 
     device = pick_device(P.device)
     return {key: load_checkpoint(res.best_path, device)
-            for key, res in train_models(P, study, progress, protocol=protocol).items()}
+            for key, res in train_models(P, study, progress, protocol=protocol, write_curves=write_curves).items()}
 
 
 # ------------------------------------------------------------------------ command line

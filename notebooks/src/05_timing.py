@@ -66,6 +66,7 @@ import numpy as np
 import pandas as pd
 
 from drfkit.study import claims
+from drfkit.study.claims import judge
 from drfkit.report.figures import color, label, new_figure
 from drfkit.util.io import atomic_write_csv
 from drfkit.study.paper import TIMING_MS, TIMING_SPEEDUP
@@ -162,19 +163,18 @@ side.round(3)
 # ATen does not split across threads (below its grain size), so extra threads cannot make it
 # faster and only expose it to contention from other processes; one thread is also the most
 # reproducible setting on a shared machine. The other thread counts and CUDA are reported beside
-# it. Targets of this book: DRF's S-sample prediction ≥ 3× faster per frame than Monoloco as
-# published at batch 1, and at most 1.25× DRF's own deterministic pass.
+# it. The rule is two-sided: the paper's claim is a factor of 2.93, so the speed-up must lie within
+# 15 % of it either way to reproduce it; a much larger factor is faster still, but a different
+# finding (partly), as a DRF far better than Monoloco is not the paper's parity in C4. Targets of
+# this book: DRF's S-sample prediction ≥ 3× faster per frame than Monoloco as published at batch 1,
+# and at most 1.25× DRF's own deterministic pass.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
 speedup = speedup_vs_monoloco(table, b1, claim_threads, "cpu")
-row = claims.c6_speedup(speedup)
-others = [f"{dev} {t} thr: {speedup_vs_monoloco(table, b1, t, dev):.2f}x" for dev, t in groups
-          if (dev, t) != ("cpu", claim_threads)]
-row["ours"] += (f" (CPU, {claim_threads} thread(s), S = {P.uncertainty.n_samples}" + ("; " + ", ".join(others) if others else "")
-                + f"; 1-min load up to {table['load_1min'].max():.1f} on {os.cpu_count()} cores)")
-_ = claims.upsert(P.profile, [row])
-print(f"C6: {row['ours']} -> {row['verdict']}")
+# judged from tables/timing.csv (written above), as `python -m drfkit claims` judges it again later
+row = judge.write(P, ["C6"]).set_index("id").loc["C6"]
+print(f"C6: {row['ours']} -> {row['verdict']} ({os.cpu_count()} cores)")
 
 
 def ms(model, mode, threads=claim_threads, batch=b1, device="cpu", column="median_ms_per_frame"):

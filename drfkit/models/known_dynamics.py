@@ -1,0 +1,235 @@
+"""A filter that knows the pendulum: the DRF's encoder, an extended Kalman filter with the benchmark's
+true equations (the model-based reference the paper's related work names: BackpropKF, a learned
+encoder with a covariance and a known transition).
+
+It splits the distance between a learned filter and the limit on pixels into what the encoder loses
+(this model) and what a learned transition loses on top (the DRF).
+
+    encoder (the DRF family's image encoder) -> w_t (B, T, 2) an observation of (cos theta, sin theta),
+                                                r_t (B, T, 2) its variance (one value per frame, repeated)
+    state x = (theta, omega), P (B, 2, 2)
+    predict: x <- f(x), the benchmark's pendulum over one frame (theta'' = -c sin theta - friction
+             theta', RK4 in ``RK4_SUBSTEPS``), F = df/dx propagated alongside; P <- F P F^T + Q,
+             Q = diag(q_theta, q_omega), q_omega = 0.1^2 the benchmark's velocity noise per frame
+    update:  h(x) = (cos theta, sin theta), H = dh/dx = [[-sin theta, 0], [cos theta, 0]],
+             ``drfkit.core.filter.ekf_update`` (Joseph form)
+    start:   theta_0 = atan2(w_0), P_0 = diag(r_0, init_velocity_var), omega_0 = 0
+    output:  mean = (cos theta, sin theta), sigma = sqrt(diag(H P H^T)) + SIGMA_FLOOR
+
+The output is the filter's own belief, no learned decoder: the model has no dropout, so its
+Monte Carlo samples are identical and its epistemic spread is 0 (``head`` accepts the arguments the
+DRF family's head takes). ``observation_output`` (w_t, sqrt r_t) is what an observation loss fits
+(``TrainConfig.obs_weight``), so that r_t is trained as a per-frame variance.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from torch import nn
+
+from drfkit.core.filter import ekf_update
+from drfkit.data import pendulum as pend
+from drfkit.models.parts import IMAGE_DOWNSAMPLES, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, check_n_samples
+from drfkit.models.sequence import SequenceModel, make_encoder
+
+RK4_SUBSTEPS = 2  # RK4: against the generator's 500 semi-implicit Euler steps < 1e-4 rad after a frame (as 5 steps; tested)
+LOG_R_RANGE = OUTPUT_LOG_R_RANGE  # r of (cos, sin) on a bounded log scale, in the output's units
+_PENDULUM_C = pend.GRAVITY * pend.LENGTH * pend.MASS / (pend.MASS * pend.LENGTH ** 2 / 3.0)
+
+
+def pendulum_step(theta: torch.Tensor, omega: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One frame of the benchmark's noiseless pendulum from (theta, omega) (B,), with its Jacobian.
+
+    Returns theta', omega' (B,) and F = d(theta', omega') / d(theta, omega) (B, 2, 2), RK4 in
+    ``RK4_SUBSTEPS`` steps with the tangents carried through every stage (forward mode by hand)."""
+    h, c, fr = pend.FRAME_DT / RK4_SUBSTEPS, _PENDULUM_C, pend.FRICTION
+    one, zero = torch.ones_like(theta), torch.zeros_like(theta)
+    # tangents of (theta, omega) with respect to the start, as columns: d/dtheta0, d/domega0
+    t_th, t_om = torch.stack([one, zero], -1), torch.stack([zero, one], -1)           # (B, 2) each
+
+    def accel(th, om, d_th, d_om):
+        return -c * torch.sin(th) - fr * om, -c * torch.cos(th).unsqueeze(-1) * d_th - fr * d_om
+
+    for _ in range(RK4_SUBSTEPS):
+        k1t, dk1t = omega, t_om
+        k1v, dk1v = accel(theta, omega, t_th, t_om)
+        k2t, dk2t = omega + 0.5 * h * k1v, t_om + 0.5 * h * dk1v
+        k2v, dk2v = accel(theta + 0.5 * h * k1t, omega + 0.5 * h * k1v, t_th + 0.5 * h * dk1t, t_om + 0.5 * h * dk1v)
+        k3t, dk3t = omega + 0.5 * h * k2v, t_om + 0.5 * h * dk2v
+        k3v, dk3v = accel(theta + 0.5 * h * k2t, omega + 0.5 * h * k2v, t_th + 0.5 * h * dk2t, t_om + 0.5 * h * dk2v)
+        k4t, dk4t = omega + h * k3v, t_om + h * dk3v
+        k4v, dk4v = accel(theta + h * k3t, omega + h * k3v, t_th + h * dk3t, t_om + h * dk3v)
+        theta = theta + h / 6.0 * (k1t + 2 * k2t + 2 * k3t + k4t)
+        omega = omega + h / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        t_th = t_th + h / 6.0 * (dk1t + 2 * dk2t + 2 * dk3t + dk4t)
+        t_om = t_om + h / 6.0 * (dk1v + 2 * dk2v + 2 * dk3v + dk4v)
+    return theta, omega, torch.stack([t_th, t_om], dim=-2)
+
+
+class KnownDynamicsFilter(SequenceModel):
+    """The DRF family's encoder with an EKF on the pendulum's true equations (module docstring)."""
+
+    kind = "known_dynamics"
+    display_label, display_color = "Known dynamics (EKF)", "tab:purple"
+    stream_follows = ("features", "filter_steps")
+
+    def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, feature_dim: int = 64,
+                 image_downsample: str = "pool", q_theta: float = 1e-6,
+                 q_omega: float = pend.TRANSITION_NOISE_STD ** 2, init_velocity_var: float = 25.0,
+                 learn_q: bool = False, encoder_channels: int = 12):
+        if input_kind != "pendulum" or out_dim != 2:
+            raise ValueError("the known-dynamics filter knows the pendulum only: input_kind 'pendulum', out_dim 2 "
+                             f"(got {input_kind!r}, {out_dim!r})")
+        if isinstance(feature_dim, bool) or not isinstance(feature_dim, int) or feature_dim < 1:
+            raise ValueError(f"feature_dim must be a positive int, got {feature_dim!r}")
+        if image_downsample not in IMAGE_DOWNSAMPLES:
+            raise ValueError(f"image_downsample must be one of {IMAGE_DOWNSAMPLES}, got {image_downsample!r}")
+        for name, value in (("q_theta", q_theta), ("q_omega", q_omega), ("init_velocity_var", init_velocity_var)):
+            if not (isinstance(value, (int, float)) and value > 0):
+                raise ValueError(f"{name} must be a variance > 0, got {value!r}")
+        if not isinstance(learn_q, bool):
+            raise ValueError(f"learn_q must be True or False, got {learn_q!r}")
+        super().__init__(dict(input_kind=input_kind, out_dim=out_dim, feature_dim=feature_dim,
+                              image_downsample=image_downsample, q_theta=float(q_theta), q_omega=float(q_omega),
+                              init_velocity_var=float(init_velocity_var), learn_q=learn_q)
+                         | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {}))
+        self.latent = 2  # what the diagnostics call the observed dims: (cos, sin)
+        self.encoder = make_encoder(input_kind, feature_dim, image_downsample, encoder_channels)
+        self.obs_mean = nn.Linear(feature_dim, 2)
+        self.obs_log_r = nn.Linear(feature_dim, 1)
+        log_q = torch.log(torch.tensor([q_theta, q_omega]))
+        self.log_q = nn.Parameter(log_q) if learn_q else nn.Buffer(log_q)
+        self.init_velocity_var = float(init_velocity_var)
+
+    # ---------------------------------------------------------------- observation
+    def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """w (B, T, 2) an observation of (cos theta, sin theta), r (B, T, 2) its variance (one per frame)."""
+        x = self.encoder(inputs)
+        lo, hi = LOG_R_RANGE
+        r = torch.exp(lo + (hi - lo) * torch.sigmoid(self.obs_log_r(x)))
+        return self.obs_mean(x), r.expand(*r.shape[:-1], 2)
+
+    def observation_output(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(w, sqrt r) (B, T, 2): the encoder's per-frame estimate and its sigma, for an observation loss."""
+        w, r = self.observe(inputs)
+        return w, r.sqrt()
+
+    # ---------------------------------------------------------------- filter
+    def _start(self, w0: torch.Tensor, r0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        theta = torch.atan2(w0[:, 1], w0[:, 0])
+        x = torch.stack([theta, torch.zeros_like(theta)], -1)                               # (B, 2)
+        P = torch.diag_embed(torch.stack([r0[:, 0], torch.full_like(theta, self.init_velocity_var)], -1))
+        return x, P
+
+    def _step(self, x, P, w, r):
+        """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F, prior x."""
+        theta, omega, F = pendulum_step(x[:, 0], x[:, 1])
+        prior = torch.stack([theta, omega], -1)
+        P = F @ P @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior))
+        s, c = torch.sin(theta), torch.cos(theta)
+        zero = torch.zeros_like(theta)
+        H = torch.stack([torch.stack([-s, zero], -1), torch.stack([c, zero], -1)], -2)       # (B, 2, 2)
+        x, P, K = ekf_update(prior, P, w - torch.stack([c, s], -1), H, r)
+        return x, P, K, F, prior
+
+    def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
+                     return_prior: bool = False) -> dict[str, torch.Tensor]:
+        """The EKF on w, r (B, T, 2). Always 'x' (B, T, 2) = (theta, omega) and 'p' (B, T, 2, 2).
+        ``return_gains``: 'gains' K (B, T, 2, 2) (state x observation; t = 0: the start's, theta from w_0),
+        'F' (B, T-1, 2, 2); ``return_prior``: 'x_prior' (B, T-1, 2), 'p_prior' (B, T-1, 2, 2)."""
+        if w.ndim != 3 or w.shape[-1] != 2 or r.shape != w.shape:
+            raise ValueError(f"w and r must both be (B, T, 2), got {tuple(w.shape)} and {tuple(r.shape)}")
+        w_steps, r_steps = w.unbind(1), r.unbind(1)
+        x, P = self._start(w_steps[0], r_steps[0])
+        xs, Ps, Ks, Fs, priors, prior_ps = [x], [P], [], [], [], []
+        if return_gains:  # at t = 0 the angle is taken from w_0 whole: the gain on the tangent is 1
+            eye = torch.zeros_like(P)
+            eye[:, 0, 0] = -torch.sin(x[:, 0])
+            eye[:, 0, 1] = torch.cos(x[:, 0])
+            Ks.append(eye)
+        for t in range(1, w.shape[1]):
+            p_before = P
+            x, P, K, F, prior = self._step(x, P, w_steps[t], r_steps[t])
+            xs.append(x), Ps.append(P)
+            if return_gains:
+                Ks.append(K), Fs.append(F)
+            if return_prior:
+                priors.append(prior)
+                prior_ps.append(F @ p_before @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior)))
+        out = {"x": torch.stack(xs, 1), "p": torch.stack(Ps, 1)}
+        if return_gains:
+            out["gains"] = torch.stack(Ks, 1)
+            out["F"] = torch.stack(Fs, 1) if Fs else w.new_empty(w.shape[0], 0, 2, 2)
+        if return_prior:
+            out["x_prior"] = torch.stack(priors, 1) if priors else w.new_empty(w.shape[0], 0, 2)
+            out["p_prior"] = torch.stack(prior_ps, 1) if prior_ps else w.new_empty(w.shape[0], 0, 2, 2)
+        return out
+
+    @staticmethod
+    def belief(x: torch.Tensor, P: torch.Tensor) -> torch.Tensor:
+        """h = [cos theta, sin theta, omega, log P_theta_theta, log P_omega_omega] (..., 5) of a belief."""
+        theta = x[..., 0]
+        return torch.stack([torch.cos(theta), torch.sin(theta), x[..., 1],
+                            torch.log(P[..., 0, 0]), torch.log(P[..., 1, 1])], -1)
+
+    def features(self, inputs, return_gains=False):
+        tr = self.filter_steps(*self.observe(inputs), return_gains=return_gains)
+        return self.belief(tr["x"], tr["p"]), tr.get("gains")
+
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+        """mean = (cos, sin), sigma = sqrt(diag(H P H^T)) + SIGMA_FLOOR (..., 2); n_samples S > 0:
+        (S, ..., 2), S identical copies (no dropout: the epistemic spread is 0)."""
+        check_n_samples(n_samples)
+        mean = h[..., :2]
+        var_theta = h[..., 3].exp().unsqueeze(-1)
+        sigma = torch.sqrt(var_theta * mean.flip(-1) ** 2) + SIGMA_FLOOR                     # |dh/dtheta| = (|sin|, |cos|)
+        if n_samples:
+            return mean.expand(n_samples, *mean.shape), sigma.expand(n_samples, *sigma.shape)
+        return mean, sigma
+
+    @property
+    def default_dropout_p(self) -> float:
+        return 0.0
+
+    def forward_with_prior(self, inputs: torch.Tensor):
+        """(mean, sigma) of the posterior (B, T, 2) and of the one-step prior (B, T-1, 2)."""
+        tr = self.filter_steps(*self.observe(inputs), return_prior=True)
+        return self.head(self.belief(tr["x"], tr["p"])), self.head(self.belief(tr["x_prior"], tr["p_prior"]))
+
+    def filter_diagnostics(self, inputs: torch.Tensor) -> dict[str, torch.Tensor]:
+        """What ``drfkit.methods.diagnostics.filter_trace`` reads of a filter: 'r' (B, T), 'gain' (B, T)
+        = trace(H K), the share of an innovation along the rod's tangent that moves the angle (1 at t = 0),
+        'prior_err' / 'static_err' (B, T-1) = ||h(f(x_{t-1})) - w_t|| / ||h(x_{t-1}) - w_t||,
+        'spectral_radius' of F_t, 'h' the features."""
+        w, r = self.observe(inputs)
+        tr = self.filter_steps(w, r, return_gains=True, return_prior=True)
+        theta = tr["x"][..., 0]
+        tangent = torch.stack([-torch.sin(theta), torch.cos(theta)], -1)                   # (B, T, 2)
+        gain = (tr["gains"][..., 0, :] * tangent).sum(-1)
+        gain[:, 0] = 1.0
+        prior_theta, last_theta = tr["x_prior"][..., 0], theta[:, :-1]
+        unit = lambda a: torch.stack([torch.cos(a), torch.sin(a)], -1)                     # noqa: E731
+        F = tr["F"].flatten(0, 1).double()
+        return {"r": r[..., 0], "gain": gain,
+                "prior_err": (unit(prior_theta) - w[:, 1:]).norm(dim=-1),
+                "static_err": (unit(last_theta) - w[:, 1:]).norm(dim=-1),
+                "spectral_radius": torch.linalg.eigvals(F).abs().amax(-1) if len(F) else F.new_empty(0),
+                "h": self.belief(tr["x"], tr["p"])}
+
+    # ---------------------------------------------------------------- streaming
+    def initial_carry(self, frame: torch.Tensor):
+        self._check_streaming(frame)
+        w, r = self.observe(frame)
+        return self._start(w[:, 0], r[:, 0])
+
+    def stream_step(self, frame: torch.Tensor, carry):
+        self._check_streaming(frame)
+        w, r = self.observe(frame)
+        x, P, _, _, _ = self._step(*carry, w[:, 0], r[:, 0])
+        return self.belief(x, P).unsqueeze(1), (x, P)
+
+
+__all__ = ["KnownDynamicsFilter", "LOG_R_RANGE", "RK4_SUBSTEPS", "pendulum_step"]

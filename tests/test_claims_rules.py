@@ -1,0 +1,283 @@
+"""Each rule of drfkit.study.claims at its boundary, fed synthetic data with known answers: a rule that
+could not fail, or that fails on the wrong side of its stated threshold, fails here. Also: the claims
+are judged from the committed tables exactly as claims.csv holds them, and no evaluation counts a
+seed twice."""
+import math
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from drfkit.study import claims
+from drfkit.study.claims import judge
+from drfkit.util.paths import REPO_ROOT
+
+MATCHED = claims.MATCHED_MONOLOCO
+
+
+# ------------------------------------------------------------------------------ C2 / C5 intervals
+def curves(drf_picp: float, base_picp: float, ci: float, noise: float = 0.75) -> pd.DataFrame:
+    rows = [{"study": "pendulum", "model": m, "noise": noise, "mpiw": w, "picp": p, "picp_lo": p - ci, "picp_hi": p + ci}
+            for m, pts in (("drf", [(1.5, drf_picp), (2.5, drf_picp)]),
+                           ("lstm", [(1.0, base_picp), (3.0, base_picp)]),
+                           ("no_dynamics", [(1.0, base_picp), (3.0, base_picp)])) for w, p in pts]
+    return pd.DataFrame(rows)
+
+
+def test_c2_and_c5_reproduce_only_beyond_the_seeds_intervals():
+    """Above in seed means but with overlapping intervals is partly; the intervals just apart reproduce."""
+    c5 = lambda c: claims.c5_intervals_under_shift(c, [("pendulum", 0.75)], {"pendulum": ["lstm", "no_dynamics"]})  # noqa: E731
+    apart, touching = curves(0.92, 0.90, 0.0099), curves(0.92, 0.90, 0.0101)
+    assert claims.c2_pendulum_picp_mpiw(apart, (0.75,))["verdict"] == claims.REPRODUCED
+    assert claims.c2_pendulum_picp_mpiw(touching, (0.75,))["verdict"] == claims.PARTLY
+    assert c5(apart)["verdict"] == claims.REPRODUCED and c5(touching)["verdict"] == claims.PARTLY
+    assert "(0% beyond the seeds' intervals)" in c5(touching)["ours"]
+    assert claims.c2_pendulum_picp_mpiw(curves(0.88, 0.90, 0.001), (0.75,))["verdict"] == claims.NOT
+
+
+# ------------------------------------------------------------------------------ C3 / C4: the input-matched Monoloco
+def by_seed(drf, nod, lstm, matched, published, spread=0.01, levels=(0.01, 0.025, 0.05)):
+    rows = []
+    for seed in range(3):
+        for i, lv in enumerate(levels):
+            for model, vals in (("drf", drf), ("no_dynamics", nod), ("lstm", lstm), (MATCHED, matched),
+                                ("monoloco", published)):
+                rows.append({"model": model, "seed": seed, "noise": lv,
+                             "mae": vals[i] + (seed - 1) * spread * (1 if model == "drf" else -1)})
+    return pd.DataFrame(rows)
+
+
+def summary_of(frame: pd.DataFrame) -> pd.DataFrame:
+    from drfkit.study.evaluate import summarise
+
+    return summarise(frame, ["model", "noise"], ["mae"])
+
+
+def test_c3_judges_the_input_matched_monoloco_not_the_published_one():
+    # DRF far better than Monoloco as published, worse than the input-matched one: not reproduced
+    table = by_seed((1, 2.0, 2.5), (1, 2.5, 3.0), (1, 2.2, 2.8), (1, 1.8, 2.2), (1, 3.0, 4.0))
+    row = claims.c3_pedestrian_ood_gain(table)
+    assert row["verdict"] == claims.PARTLY  # above 0 beyond seed noise against no_dynamics and the LSTM only
+    assert "second comparison, not judged: vs Monoloco as published: +" in row["ours"]
+    worse = by_seed((1, 2.6, 3.1), (1, 2.5, 3.0), (1, 2.2, 2.8), (1, 1.8, 2.2), (1, 3.0, 4.0))
+    assert claims.c3_pedestrian_ood_gain(worse)["verdict"] == claims.NOT
+    better = by_seed((1, 1.7, 2.1), (1, 2.5, 3.0), (1, 2.2, 2.8), (1, 1.8, 2.2), (1, 3.0, 4.0))
+    assert claims.c3_pedestrian_ood_gain(better)["verdict"] == claims.REPRODUCED
+
+
+def test_c3_without_per_seed_rows_of_the_matched_monoloco_cannot_reproduce():
+    table = by_seed((1, 1.7, 2.1), (1, 2.5, 3.0), (1, 2.2, 2.8), (1, 1.8, 2.2), (1, 3.0, 4.0))
+    seeds_only = table[table["model"] != MATCHED]
+    row = claims.c3_pedestrian_ood_gain(seeds_only, matched_summary=summary_of(table))
+    assert row["verdict"] == claims.PARTLY and "seed means only" in row["ours"]  # no interval: not beyond noise
+    row = claims.c3_pedestrian_ood_gain(seeds_only)
+    assert row["verdict"] == claims.PARTLY and "not evaluated" in row["ours"]
+
+
+def test_c3_at_the_interval_edge():
+    """Reproduced needs the interval's lower bound above 0 against every comparator: the same mean gain
+    with a seed spread that reaches 0 is partly."""
+    tight = by_seed((1, 2.0, 2.0), (1, 2.2, 2.2), (1, 2.2, 2.2), (1, 2.2, 2.2), (1, 3, 3), spread=0.01)
+    loose = by_seed((1, 2.0, 2.0), (1, 2.2, 2.2), (1, 2.2, 2.2), (1, 2.2, 2.2), (1, 3, 3), spread=0.2)
+    assert claims.c3_pedestrian_ood_gain(tight)["verdict"] == claims.REPRODUCED
+    assert claims.c3_pedestrian_ood_gain(loose)["verdict"] == claims.PARTLY  # positive means against all three
+
+
+def test_c4_at_its_band_edges_against_the_matched_monoloco():
+    def summary(d, matched, published=1.42):
+        return pd.DataFrame([{"model": m, "noise": 0.01, "mae": v, "mae_ci": 0.0}
+                             for m, v in (("drf", d), (MATCHED, matched), ("monoloco", published))])
+    verdict = lambda d: claims.c4_in_distribution_parity(summary(d, 2.0))["verdict"]  # noqa: E731
+    assert verdict(2.2) == claims.REPRODUCED and verdict(1.8) == claims.REPRODUCED
+    assert verdict(2.2002) == claims.PARTLY and verdict(1.7998) == claims.BETTER
+    assert verdict(2.5) == claims.PARTLY and verdict(2.5002) == claims.NOT
+    row = claims.c4_in_distribution_parity(summary(0.835, 0.769), note=" (interval withheld)")
+    assert row["verdict"] == claims.REPRODUCED and "+8.6%" in row["ours"]
+    assert row["ours"].index("(interval withheld)") < row["ours"].index("second comparison")
+    assert "Monoloco as published 1.42" in row["ours"] and "-41.2%" in row["ours"]
+    no_matched = summary(0.835, 0.769)[lambda d: d["model"] != MATCHED]
+    assert claims.c4_in_distribution_parity(no_matched)["verdict"] == claims.NOT_TESTABLE
+
+
+def test_c4_shows_the_paired_interval_when_seeds_are_given():
+    table = by_seed((0.8, 1, 1), (1, 1, 1), (1, 1, 1), (0.75, 1, 1), (1.4, 1, 1), spread=0.01)
+    row = claims.c4_in_distribution_parity(summary_of(table), 0.01, by_seed=table)
+    assert re.search(r"\(\+6\.7%; paired by seed \+6\.7% \[-0\.2, \+13\.5\]\)", row["ours"]), row["ours"]
+
+
+# ------------------------------------------------------------------------------ C7 on the sweep
+FRACTIONS = [round(0.05 * i, 2) for i in range(21)]
+
+
+def sweep(study, gains, room=None, base=0.85, slope=0.05, times=(1.0, 10.0)):
+    """Per seed and swept fraction f: random PICP base + slope f; Kalman-gain PICP that + gains[seed]
+    (0 at f = 0 and 1, where both select the same frames); the oracle + room; time t0 + f (t1 - t0)."""
+    rows = []
+    for seed, gain in enumerate(gains):
+        for f in FRACTIONS:
+            inner = 0 < f < 1
+            rnd = base + slope * f
+            t = times[0] + f * (times[1] - times[0])
+            rows += [{"study": study, "seed": seed, "val_fraction": f, "fraction": f, "method": "random", "picp": rnd,
+                      "time_ms": t},
+                     {"study": study, "seed": seed, "val_fraction": f, "fraction": f, "method": "kalman_gain",
+                      "picp": rnd + gain * inner, "time_ms": t}]
+            if room is not None:
+                rows.append({"study": study, "seed": seed, "val_fraction": f, "fraction": f, "method": "oracle",
+                             "picp": rnd + room * inner, "time_ms": np.nan})
+    return pd.DataFrame(rows)
+
+
+def settings(study, times=(1.0, 10.0), base=0.85, slope=0.05):
+    return pd.DataFrame([{"study": study, "setting": "no_dropout", "time_ms": times[0], "picp": base, "fraction": 0.0},
+                         {"study": study, "setting": "always", "time_ms": times[1], "picp": base + slope, "fraction": 1.0}])
+
+
+def test_c7_averages_the_paired_gain_over_the_inner_fractions():
+    gain = claims.sweep_gain(sweep("pendulum", [0.01, 0.02, 0.03]), "pendulum")
+    assert gain[0] == pytest.approx(0.02) and gain[1] < 0.02 < gain[2]
+    assert claims.sweep_gain(sweep("pendulum", [0.01] * 3), "pendulum")[1] == pytest.approx(0.01)
+
+
+def test_c7a_gain_test_at_zero():
+    """Reproduced needs the seeds' interval of KG - random above 0; a positive mean whose interval
+    reaches 0 is partly; a mean at or below 0 is not reproduced."""
+    c7 = lambda gains: claims.c7_gating(sweep("pendulum", gains), "pendulum", settings("pendulum"))  # noqa: E731
+    assert c7([0.010, 0.011, 0.012])["verdict"] == claims.REPRODUCED
+    assert c7([-0.01, 0.005, 0.02])["verdict"] == claims.PARTLY
+    assert c7([-0.01, 0.0, 0.01])["verdict"] == claims.NOT
+    assert c7([-0.02, -0.01, -0.015])["verdict"] == claims.NOT
+    empty = sweep("pendulum", [0.01])[lambda d: d["val_fraction"].isin([0.0, 1.0])]
+    assert claims.c7_gating(empty, "pendulum")["verdict"] == claims.NOT_TESTABLE
+
+
+def test_c7a_time_test_applies_from_half_the_cost():
+    gains = [0.010, 0.011, 0.012]
+    at = lambda t0: claims.c7_gating(sweep("pendulum", gains, times=(t0, 10.0)), "pendulum",  # noqa: E731
+                                     settings("pendulum", times=(t0, 10.0)))
+    row = at(5.0001)  # MC dropout just under half of the cost: not applicable, and the row says why
+    assert row["verdict"] == claims.REPRODUCED and "not applicable on this machine" in row["ours"]
+    assert "MC dropout is 50% of the per-frame cost here" in row["ours"]
+    # exactly half: applicable; KG within 1.5 points of always from f = 0.5 (0.85 + 0.025 + 0.011 >= 0.885),
+    # at 7.5 / 10 = 0.75x always's time: passes at the edge
+    row = at(5.0)
+    assert row["verdict"] == claims.REPRODUCED and "time test passed" in row["ours"]
+
+
+def test_c7a_time_test_at_its_edges():
+    gains = [0.010, 0.011, 0.012]
+    base = sweep("pendulum", gains)
+    first = base["val_fraction"].eq(0.5) & base["method"].eq("kalman_gain")  # the first fraction near always
+
+    def verdict(time_there):
+        frame = base.copy()
+        frame.loc[first, "time_ms"] = time_there
+        return claims.c7_gating(frame, "pendulum", settings("pendulum"))
+    assert verdict(7.5)["verdict"] == claims.REPRODUCED
+    late = verdict(7.5001)
+    assert late["verdict"] == claims.PARTLY and "time test failed" in late["ours"]
+    # 1.5 points: the gain 0.009 leaves KG at f = 0.5 1.6 points below always, so the first near fraction moves on
+    frame = sweep("pendulum", [0.009] * 3)
+    row = claims.c7_gating(frame, "pendulum", settings("pendulum"))
+    assert "from 55% of frames" in row["ours"]
+
+
+def test_c7b_no_gain_band_and_its_testability():
+    c7 = lambda gains, room=None: claims.c7_gating(sweep("pedestrians", gains, room), "pedestrians")  # noqa: E731
+    assert c7([0.0, 0.001, -0.001])["verdict"] == claims.REPRODUCED
+    assert c7([0.0090, 0.0092, 0.0094])["verdict"] == claims.REPRODUCED  # interval [0.87, 0.97] points: inside
+    assert c7([0.0, 0.01, 0.02])["verdict"] == claims.PARTLY             # mean 1 point, interval beyond
+    assert c7([0.012, 0.013, 0.014])["verdict"] == claims.NOT            # a clear gain: not the paper's finding
+    assert c7([-0.03, -0.02, -0.025])["verdict"] == claims.NOT
+    # even a perfect gate within 1 point of random: nothing could be told apart
+    assert c7([0.0, 0.001, -0.001], room=0.01)["verdict"] == claims.NOT_TESTABLE
+    row = c7([0.0, 0.001, -0.001], room=0.0101)
+    assert row["verdict"] == claims.REPRODUCED and "oracle (frames of largest true error) - random +1.01 pt" in row["ours"]
+
+
+# ------------------------------------------------------------------------------ F1, F2
+def mechanism(rho, ratio=0.1, prior=0.8):
+    return pd.DataFrame([{"model": "drf", "seed": s, "r_noise_spearman": r, "gain_ratio_blackout": ratio,
+                          "prior_ratio": prior} for s, r in enumerate(np.atleast_1d(rho))])
+
+
+def test_f1_uses_the_sign_of_rho():
+    """A ρ at or below 0 is r not following frame quality: not reproduced, whatever the gain and F do; a
+    weak positive ρ with the other two met is partly; ρ >= 0.8 with both met reproduces."""
+    f1 = lambda *a: claims.f1_filter_mechanism(mechanism(*a), 0.75)  # noqa: E731
+    assert f1(0.8)["verdict"] == claims.REPRODUCED
+    assert f1(0.7999)["verdict"] == claims.PARTLY
+    assert f1(0.0001)["verdict"] == claims.PARTLY
+    assert f1(0.0)["verdict"] == claims.NOT
+    row = f1([-0.65, -0.09, -0.50])
+    assert row["verdict"] == claims.NOT and "r falls as frames get noisier" in row["ours"]
+    assert "-0.41 [-1.13, +0.31]" in row["ours"]  # the book's seeds, with their interval
+    assert f1(0.79, 0.9, 2.6)["verdict"] == claims.NOT  # positive but nothing met
+
+
+def test_f2_is_labelled_by_the_protocols_training_frames():
+    from drfkit.study.claims.mechanism import pure_noise_training
+
+    assert "pure-noise blackouts in 50 % of its sequences" in pure_noise_training("book")
+    assert pure_noise_training("paper") is None
+    dark = pd.DataFrame({"model": ["drf"] * 3 + ["lstm"] * 3, "seed": [0, 1, 2] * 2,
+                         "mae_blackout": [0.099, 0.10, 0.101, 0.07, 0.074, 0.078]})
+    row = claims.f2_blackout_coasting(dark, [0.05, 0.06, 0.07], in_distribution=pure_noise_training("book"))
+    assert row["verdict"] == claims.REPRODUCED and row["ours"].startswith("in distribution (this protocol trains")
+    assert "DRF 0.100 [" in row["ours"] and "reference" in row["ours"]
+    above = dark.assign(mae_blackout=dark["mae_blackout"] + 0.0001 * dark["model"].eq("drf"))
+    row = claims.f2_blackout_coasting(above, 0.06)
+    assert row["verdict"] == claims.NOT and row["ours"].startswith("out of distribution")
+
+
+# ------------------------------------------------------------------------------ the judge and the data
+def test_claims_csv_is_what_the_judge_makes_of_the_committed_tables():
+    """A reviewer's recomputation: every row of the paper profile's claims.csv is the rule applied to its
+    committed tables (``python -m drfkit claims --profile paper`` rewrites claims.csv from them)."""
+    from drfkit.study.params import for_notebook, load_profile
+
+    root = REPO_ROOT / "results" / "paper"
+    committed = claims.read_claims(root / "claims.csv").set_index(["id", "protocol"])
+    values = load_profile("paper")
+    judged = []
+    for notebook in dict.fromkeys(c.notebook for c in claims.CLAIMS.values()):
+        ids = [i for i, c in claims.CLAIMS.items() if c.notebook == notebook]
+        judged += judge.judge(for_notebook(notebook, values), ids)
+    assert {(r["id"], pr) for pr, r in judged} == set(committed.index)
+    for protocol, row in judged:
+        kept = committed.loc[(row["id"], protocol)]
+        for column in ("claim", "paper", "ours", "rule", "verdict"):
+            assert kept[column] == row[column], (row["id"], protocol, column)
+
+
+def test_a_summary_counting_a_seed_twice_has_its_interval_withheld(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    tables = tmp_path / "t" / "tables"
+    tables.mkdir(parents=True)
+    pd.DataFrame([{"model": MATCHED, "noise": 0.01, "n_seeds": 6, "mae": 0.77, "mae_ci": 0.02, "mae_lo": 0.75,
+                   "mae_hi": 0.79},
+                  {"model": MATCHED, "noise": 0.05, "n_seeds": 3, "mae": 1.8, "mae_ci": 0.1, "mae_lo": 1.7,
+                   "mae_hi": 1.9}]).to_csv(tables / "pedestrians_monoloco_inputs.csv", index=False)
+    summary, seeds, note = judge._matched_monoloco(SimpleNamespace(profile="t", seeds=[0, 1, 2]))
+    assert seeds is None and "withheld" in note and "p = 0.01" in note
+    assert math.isnan(summary.set_index("noise").loc[0.01, "mae_ci"]) and summary.set_index("noise").loc[0.05, "mae_ci"] == 0.1
+
+
+def test_no_evaluation_counts_a_level_or_a_seed_twice():
+    """The pedestrian evaluation of notebook 03 once passed [train_p, *eval_p] with train_p in eval_p:
+    every seed counted twice at p = 0.01 (pseudo-replication). evaluate_study refuses a repeated level,
+    summarise a repeated seed, and no notebook splices level lists."""
+    from drfkit.study.evaluate import evaluate_study, summarise
+
+    with pytest.raises(ValueError, match="twice"):
+        evaluate_study(None, "pedestrians", [0.01, 0.01, 0.025, 0.05])
+    rows = pd.DataFrame({"model": "m", "noise": 0.01, "seed": [0, 1, 2, 0], "mae": [1.0, 2.0, 3.0, 1.0]})
+    with pytest.raises(ValueError, match="more than once"):
+        summarise(rows, ["model", "noise"], ["mae"])
+    assert summarise(rows.iloc[:3], ["model", "noise"], ["mae"])["n_seeds"].iloc[0] == 3
+    for src in (REPO_ROOT / "notebooks" / "src").glob("*.py"):
+        for call in re.findall(r"evaluate_study\((.*)", src.read_text()):
+            assert not re.search(r"\[[^\]]*\*", call), (src.name, call)  # a level list built as [a, *b]

@@ -1,0 +1,62 @@
+"""The limit on pixels: the exact observation model of the benchmark's noise and the Bayes estimators on it."""
+import math
+
+import numpy as np
+import torch
+
+from drfkit.data.noise import Noise, blend_uniform_noise
+from drfkit.data.pendulum import generate_pendulum
+from drfkit.data.rod_bank import rod_bank
+from drfkit.methods import pixel_bayes as pb
+
+
+def test_pixel_likelihood_is_a_distribution_and_matches_the_blend():
+    k = torch.arange(256)[:, None]
+    for level in (0.0, 0.13, 0.5, 1.0):
+        for c in (0, 37, 200, 255):
+            p = pb.pixel_log_prob(k, torch.tensor([[c]]), torch.tensor(level)).exp().squeeze()
+            mass = float(p[p > 2 * pb.FLOOR / max(255 * level, 1)].sum())   # the floor is not mass
+            assert abs(mass - 1.0) < 1e-9, (level, c, mass)
+    # against the generator's own blend: the empirical distribution of one pixel
+    rng = np.random.default_rng(0)
+    img = np.full((20000, 1, 1), 90, np.uint8)
+    noisy = blend_uniform_noise(img, np.full(20000, 0.3), rng).ravel()
+    hist = np.bincount(noisy, minlength=256) / noisy.size
+    p = pb.pixel_log_prob(torch.arange(256), torch.tensor(90), torch.tensor(0.3)).exp().numpy()
+    assert np.abs(hist - np.where(p > 1e-3, p, 0)).max() < 0.01
+
+
+def test_the_true_image_is_the_most_likely_on_clean_and_noisy_frames():
+    bank = rod_bank()
+    rng = np.random.default_rng(1)
+    j = rng.integers(0, len(bank), 6)
+    clean = bank.images[j]
+    for level in (0.0, 0.5):
+        frames = blend_uniform_noise(clean, np.full(6, level), rng)
+        ll = pb.frame_log_likelihoods(frames, np.full(6, level))
+        # at l > 0 a neighbouring image whose differing pixels all lie in range ties with the true one
+        assert np.all(ll[np.arange(6), j] >= ll.max(1) - 1e-6)
+        if level == 0.0:
+            assert np.array_equal(ll.argmax(1), j)
+
+
+def test_marginal_over_levels_keeps_the_posterior_of_the_whole_grid():
+    d = generate_pendulum(1, 30, Noise("rkn_uniform", 0.9), 5)
+    frames = d["images"][0]
+    ll = pb.frame_log_likelihoods(frames)
+    full = np.stack([pb.frame_log_likelihoods(frames, np.full(len(frames), g)) for g in pb.LEVEL_GRID])
+    brute = torch.logsumexp(torch.from_numpy(full), 0).numpy() - math.log(len(pb.LEVEL_GRID))
+    assert np.abs(pb.per_frame_bayes(frames, loglik=ll) - pb.per_frame_bayes(frames, loglik=brute)).max() < 1e-3
+
+
+def test_filter_on_pixels_beats_every_frame_alone_and_coasts():
+    d = generate_pendulum(4, 40, Noise("rkn_uniform", 0.75), 11)
+    images = d["images"].copy()
+    images[:, 20:30] = blend_uniform_noise(images[:, 20:30], np.ones((4, 10)), np.random.default_rng(2))
+    ll = pb.sequence_log_likelihoods(images)
+    per_frame = pb.per_frame_bayes(images, loglik=ll.reshape(-1, ll.shape[-1]))
+    filtered = pb.pixel_particle_filter(ll, n_particles=500, seed=0)
+    err_pf = np.abs(filtered - d["targets"]).mean(axis=(0, 2))
+    err_frame = np.abs(per_frame - d["targets"]).mean(axis=(0, 2))
+    assert err_pf[20:30].mean() < 0.25 < err_frame[20:30].mean()   # the state coasts where a frame alone knows nothing
+    assert err_pf[:20].mean() < 0.01 and err_frame[:20].mean() < 0.02
