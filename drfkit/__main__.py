@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("drfkit.study.bench", "the inference benchmark (make bench), results/<profile>/timing.csv"),
     "simstats": ("drfkit.study.sim_stats", "statistics of the simulated pedestrian source"),
     "nuscenes": ("drfkit.data.nuscenes", "nuScenes: write salt-and-pepper noisy copies of the images"),
+    "rodbank": ("drfkit.data.rod_bank", "check the pendulum's rod bank against PIL's drawing on N random angles"),
 }
 
 

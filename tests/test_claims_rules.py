@@ -216,11 +216,21 @@ def test_f1_uses_the_sign_of_rho():
     assert f1(0.79, 0.9, 2.6)["verdict"] == claims.NOT  # positive but nothing met
 
 
-def test_f2_is_labelled_by_the_protocols_training_frames():
-    from drfkit.study.claims.mechanism import pure_noise_training
+def test_f2_is_labelled_by_the_protocols_training_frames(monkeypatch):
+    from drfkit.methods import protocols
+    from drfkit.study.claims.mechanism import UNKNOWN_TRAINING, pure_noise_training, training_label
 
+    assert pure_noise_training("book") is None and pure_noise_training("paper") is None  # the third round's book
+    monkeypatch.setitem(protocols.PROTOCOLS, "book", protocols.PROTOCOLS["book"] | {"drf": "fit_prior_split_book"})
     assert "pure-noise blackouts in 50 % of its sequences" in pure_noise_training("book")
-    assert pure_noise_training("paper") is None
+    # a table says what its models saw; one made before it did says it does not know
+    table = pd.DataFrame({"model": ["drf", "lstm"], "pure_noise_training": [pure_noise_training("book")] * 2})
+    assert training_label(table) == pure_noise_training("book")
+    assert training_label(table.assign(pure_noise_training="")) is None
+    assert training_label(table.drop(columns="pure_noise_training")) == UNKNOWN_TRAINING
+    row = claims.f2_blackout_coasting(pd.DataFrame({"model": ["drf"], "seed": [0], "mae_blackout": [0.05]}), 0.06,
+                                      in_distribution=UNKNOWN_TRAINING)
+    assert row["ours"].startswith("in or out of distribution unknown")
     dark = pd.DataFrame({"model": ["drf"] * 3 + ["lstm"] * 3, "seed": [0, 1, 2] * 2,
                          "mae_blackout": [0.099, 0.10, 0.101, 0.07, 0.074, 0.078]})
     row = claims.f2_blackout_coasting(dark, [0.05, 0.06, 0.07], in_distribution=pure_noise_training("book"))

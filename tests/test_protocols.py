@@ -43,13 +43,15 @@ def test_paper_protocol_keeps_its_checkpoint_names_and_book_differs(tmp_path, mo
     assert "noise_head" not in studies.model_config("pendulum", "drf", P)
     book = studies.model_config("pendulum", "drf", P, "book")
     assert book["transition_kind"] == "basis" and book["memory_dims"] == 15 and book["noise_head"] == "log"
-    assert book["decoder_split"] is True
+    assert book["readout"] == "identity" and book["encoder_channels"] == 32   # the output's units, the wider encoder
     assert "memory_dims" not in studies.model_config("pendulum", "lstm", P, "book")
-    # the three models of the book's protocol share its recipe and its training data
-    specs = [protocol_spec("book", kind) for kind in ("drf", "lstm", "no_dynamics")]
-    assert all(s["blackouts"] == specs[0]["blackouts"] and s["train_max_noise"] == 0.5 for s in specs)
-    assert all({k: v for k, v in s["train"].items() if k != "prior_weight"} == FIT_THE_MEAN for s in specs)
-    for kind in ("drf", "lstm", "no_dynamics"):
+    # the models of the book's protocol share its recipe and its training data (no pure-noise frames)
+    kinds = ("drf", "lstm", "no_dynamics", "known_dynamics")
+    specs = [protocol_spec("book", kind) for kind in kinds]
+    assert all(s["blackouts"] is None and s["train_max_noise"] == 0.5 for s in specs)
+    assert all({k: v for k, v in s["train"].items() if k not in ("prior_weight", "obs_weight")} == FIT_THE_MEAN
+               for s in specs)
+    for kind in kinds[:3]:
         assert studies.checkpoint_stem(P, "pendulum", kind, 0, "book") != studies.checkpoint_stem(P, "pendulum", kind, 0)
     cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
     assert (cfg.epochs, cfg.lr, cfg.batch_size) == (P.pendulum.book.epochs, P.pendulum.book.lr, P.pendulum.book.batch_size)
@@ -57,9 +59,16 @@ def test_paper_protocol_keeps_its_checkpoint_names_and_book_differs(tmp_path, mo
         studies.model_config("pedestrians", "drf", None, "blackout")
 
 
-def test_book_protocol_blacks_out_training_sequences_only(tmp_path, monkeypatch):
+def test_training_blackouts_touch_the_training_sequences_only(tmp_path, monkeypatch):
+    # a protocol with training blackouts (the second round's) blacks out training frames, never the first
+    # five, never validation; the book's protocol (the third round's) has none, so its data are the paper's
+    from drfkit.methods import protocols
+
     P = quick(tmp_path, monkeypatch)
-    paper_train, book_train = studies.pendulum_data(P, "train"), studies.pendulum_data(P, "train", protocol="book")
+    paper_train = studies.pendulum_data(P, "train")
+    assert torch.equal(paper_train.inputs, studies.pendulum_data(P, "train", protocol="book").inputs)
+    monkeypatch.setitem(protocols.PROTOCOLS, "book", protocols.PROTOCOLS["book"] | {"drf": "fit_prior_split_book"})
+    book_train = studies.pendulum_data(P, "train", protocol="book")
     changed = (paper_train.inputs != book_train.inputs).flatten(2).any(-1)          # (N, T) frames that differ
     assert changed.any() and not changed[:, :5].any()
     assert torch.equal(studies.pendulum_data(P, "val").inputs, studies.pendulum_data(P, "val", protocol="book").inputs)
@@ -111,17 +120,29 @@ def test_ablation_cli_rejects_unknown_variants(capsys):
     assert "unknown variant" in capsys.readouterr().err
 
 
-def test_the_book_protocol_is_what_the_second_round_chose_by_its_rule():
-    """PROTOCOLS['book']['drf'] is the DRF variant that ``ablation.mechanism_targets`` ranks first on
-    the committed validation rows of the second round (most of F1's and F2's targets met, then the
-    lowest MAE at 0.75): a protocol picked by hand, or rows that change the choice, fail here."""
+def test_the_book_protocol_is_what_the_third_round_chose_by_its_rule():
+    """PROTOCOLS['book']['drf'] is the DRF variant that ``ablation.mechanism_targets`` ranks first among
+    the third round's filters trained without pure-noise frames, on the committed validation rows (most
+    of F1's and F2's targets met, then the lowest MAE at 0.75), with the encoder probe's wider encoder;
+    the second round's rule still picks the former choice on its own rows. A protocol picked by hand, or
+    rows that change the choice, fail here."""
+    from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, WIDE_ENCODER, variant_spec
     from drfkit.util.paths import REPO_ROOT
 
-    summary = ablation.summarise_ablation(ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation"))
-    ranked = ablation.mechanism_targets(summary)
-    assert ranked.iloc[0]["variant"] == PROTOCOLS["book"]["drf"]
+    rows = ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation")
+    round2 = ablation.mechanism_targets(ablation.summarise_ablation(rows[rows["variant"].isin(list(ROUND2_VARIANTS))]))
+    assert round2.iloc[0]["variant"] == "fit_prior_split_book"
+    summary = ablation.summarise_ablation(rows[rows["variant"].isin(list(ROUND3_VARIANTS))])
+    ranked = ablation.mechanism_targets(summary, pure_noise_free=True)
     assert ranked.iloc[0]["targets_met"] > ranked.iloc[1]["targets_met"] or \
         ranked.iloc[0]["mae_0.75"] <= ranked.iloc[1]["mae_0.75"]
+    chosen = variant_spec(PROTOCOLS["book"]["drf"])
+    winner = variant_spec(ranked.iloc[0]["variant"])
+    assert chosen == winner | {"model": winner["model"] | WIDE_ENCODER}
+    for kind in ("no_dynamics", "lstm", "known_dynamics"):   # every model: the same data, the same encoder
+        spec = variant_spec(PROTOCOLS["book"][kind])
+        assert spec["blackouts"] is None and spec["train_max_noise"] == 0.5 and spec["train"]["fresh_noise"]
+        assert {k: spec["model"][k] for k in WIDE_ENCODER} == WIDE_ENCODER
 
 
 def test_mechanism_targets_use_the_claims_thresholds_at_their_boundaries():

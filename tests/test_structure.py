@@ -170,8 +170,9 @@ def test_every_registered_study_is_wired_end_to_end():
     from drfkit.study import studies
     from drfkit.models import MODEL_CLASSES
     from drfkit.study.params import NOTEBOOKS
-    from drfkit.study.schema import flat_name
+    from drfkit.study.schema import PATHS, SPECS, flat_name
     from drfkit.data.noise import NOISE_KINDS, Noise
+    from drfkit.study.claims.efficiency import GATING_CLAIMS
     from drfkit.study.registry import STUDIES
 
     for name, s in STUDIES.items():
@@ -184,6 +185,11 @@ def test_every_registered_study_is_wired_end_to_end():
         assert set(s.kinds) <= set(MODEL_CLASSES), name
         assert studies.TRAINING_NOTEBOOK[name] == s.training_notebook
         assert s.noise_kind in NOISE_KINDS and s.noise(0.1) == Noise(s.noise_kind, 0.1), name
+        assert s.gating_claim in ("", *GATING_CLAIMS), name
+    # a registry-bounded list of a study's section (its models, its protocols) is bounded by a study that reads it
+    for key, spec in SPECS.items():
+        if spec.registry and spec.registry != "*":
+            assert any(s.section == PATHS[key][0] for s in STUDIES.values()), key
 
 
 def profile_reads(source: str, names: set[str]) -> list[str]:

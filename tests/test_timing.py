@@ -515,3 +515,13 @@ def test_streaming_with_a_non_identity_transition(study, kind):
         whole = model.features(seq)[0]
         assert not torch.allclose(whole, before, atol=1e-3)  # the perturbation reaches the features
         torch.testing.assert_close(stream(model, seq), whole, rtol=1e-4, atol=1e-5)
+
+
+def test_device_ratios_divide_cpu_by_gpu_within_a_run():
+    from drfkit.study.bench import device_ratios
+
+    rows = [{"study": "pendulum", "model": "drf", "mode": "batched", "batch": 16, "threads": t, "device": d,
+             "median_ms_per_frame": ms} for t, d, ms in ((1, "cpu", 8.0), (2, "cpu", 5.0), (1, "cuda (H100)", 0.5))]
+    ratios = device_ratios(pd.DataFrame(rows))
+    assert ratios["gpu_over_cpu_speedup"].tolist() == [10.0] and ratios["cpu_threads"].tolist() == [2]
+    assert device_ratios(pd.DataFrame(rows[:2])).empty   # no GPU in the run: nothing to compare

@@ -130,13 +130,17 @@ def verify(n_angles: int, seed: int = 0, chunk: int = 20_000) -> int:
     return mismatches
 
 
-if __name__ == "__main__":  # python -m drfkit.data.rod_bank [N]: the bank against PIL on N random angles
-    import sys
+def main(argv: list[str] | None = None) -> int:
+    """``python -m drfkit rodbank [N]``: the bank against PIL on N random angles (default 10^6); exit 1 if any differ."""
+    import argparse
     import time
 
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 1_000_000
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("n_angles", nargs="?", type=int, default=1_000_000)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
     t0 = time.perf_counter()
-    bad = verify(n)
-    print(f"{len(rod_bank())} bank images; {n} random angles drawn by the bank and by PIL: {bad} differ "
+    bad = verify(args.n_angles, args.seed)
+    print(f"{len(rod_bank())} bank images; {args.n_angles} random angles drawn by the bank and by PIL: {bad} differ "
           f"({time.perf_counter() - t0:.0f} s)")
-    raise SystemExit(1 if bad else 0)
+    return 1 if bad else 0

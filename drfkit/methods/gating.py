@@ -34,7 +34,8 @@ others; the results are scattered back. Times are measured, interleaved across s
 on the same test batch in the same run. The metrics of every setting and threshold are
 assembled per frame from one deterministic and one always-dropout pass (``assemble``): the
 head is per frame, so that is gated inference's result on common random numbers, at the
-cost of two passes instead of one per threshold. Only models with a filter (DRF) have gains.
+cost of two passes instead of one per threshold. Only a model that declares ``competency_gain``
+(``drfkit.models.sequence``: square gains on its state, the DRF) is gated; ``fit_gate`` refuses others.
 
 Settings (the paper's table): ``no_dropout`` (aleatoric only), ``random`` (the same number
 of frames as the Kalman-gain gate selects on test, drawn uniformly, seeded),
@@ -70,7 +71,7 @@ def mean_gain(gains: torch.Tensor) -> torch.Tensor:
     if not isinstance(gains, torch.Tensor) or gains.ndim != 4 or gains.shape[-1] != gains.shape[-2]:
         shape = tuple(gains.shape) if isinstance(gains, torch.Tensor) else type(gains).__name__
         raise ValueError(f"gains must be a tensor (B, T, n, n) of Kalman gains, got {shape}; "
-                         f"only models with a filter (kind 'drf') have them")
+                         f"only models that declare competency_gain (the DRF, kind 'drf') are gated on them")
     return gains.diagonal(dim1=-2, dim2=-1).mean(dim=-1)
 
 
@@ -275,7 +276,7 @@ def select_frames(setting: str, gains: torch.Tensor | None, mask: torch.Tensor, 
                              "on validation data (fit_gate)")
         if gains is None:
             raise ValueError(f"model kind {kind!r} has no Kalman filter, so no gains "
-                             f"to gate on; gating needs a 'drf' model")
+                             f"to gate on; gating needs a model that declares competency_gain (the DRF, 'drf')")
         return apply_gating(competency_score(gains, direction), threshold, mask)
     if setting == "random":
         if n_random is None:
@@ -344,11 +345,16 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
              n_points: int, level: float = 0.95, seed: int = 0, device=None) -> tuple[Gate, pd.DataFrame]:
     """Fit direction and threshold on the VALIDATION set ``val`` (a SequenceData) only.
 
-    Returns the gate and the validation table of candidate fractions (see choose_threshold).
+    Returns the gate and the validation table of candidate fractions (see choose_threshold). A model
+    that declares no ``competency_gain`` (``drfkit.models.sequence``) is refused.
     """
     n_samples = check_n_samples(n_samples)
     if n_samples < 1:
         raise ValueError("n_samples must be >= 1: the always-dropout reference needs MC samples")
+    if not getattr(model, "competency_gain", False):
+        raise ValueError(f"model kind {model.config.get('kind')!r} declares no competency_gain "
+                         f"(drfkit.models.sequence): its gains, if any, do not score competency; gating needs "
+                         f"a model that does (the DRF, 'drf')")
     p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
     device = torch.device(device) if device is not None else next(model.parameters()).device
     was = _eval_mode(model)
@@ -356,7 +362,8 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
         x = as_model_input(model, val.inputs).to(device)
         h, gains = model.features(x, return_gains=True)
         if gains is None:
-            raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs 'drf'")
+            raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs a model that "
+                             f"declares competency_gain (the DRF, 'drf')")
         det_mean, det_sigma = model.head(h)
         torch.manual_seed(seed)
         mc_mean, _, _, mc_total = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p))

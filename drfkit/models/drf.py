@@ -10,6 +10,7 @@ import torch
 from drfkit.core.filter import kalman_step
 from drfkit.models.basis import BasisTransition
 from drfkit.models.parts import mean_and_log_variance
+from drfkit.models import recursion
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 from drfkit.models.sequence import _EncodedSequenceModel
 
@@ -50,6 +51,8 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
 
     kind = "drf"
     stream_follows = ("features", "run_filter", "filter_steps")
+    #: its gains K_t (B, T, n, n) act on the latent state: mean diag K_t scores competency (gating)
+    competency_gain = True
     #: train through the one-node recursion; False differentiates the per-step loop with autograd
     #: (same values, slower: kept for the tests and for timing the difference, not a config option)
     whole_sequence = True
@@ -119,6 +122,17 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
             return z, p_diag, None
         trace = self.filter_steps(w, r, return_gains=return_gains)
         return trace["z"], trace["p_diag"], trace.get("gains")
+
+    def one_node_recursion(self, w: torch.Tensor, r: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The training recursion as one autograd node on observations w, r (B, T, n): posterior means z
+        and variances diag P (B, T, n) (``drfkit.models.recursion.drf_recursion``, looked up when called),
+        whatever ``run_filter`` would choose; ``drfkit.methods.timing.recursion_scaling`` times it apart
+        from the training step, with gradients for ``recursion_weights()``."""
+        return recursion.drf_recursion(self.transition, w, r)
+
+    def recursion_weights(self) -> list[torch.nn.Parameter]:
+        """The weights ``one_node_recursion`` reads: the transition network's."""
+        return list(self.transition.parameters())
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
                      return_transition: bool = False, return_prior: bool = False) -> dict[str, torch.Tensor]:

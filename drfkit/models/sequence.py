@@ -23,6 +23,20 @@ rely on:
                                  ``per_frame = True`` and inherits the stateless step; one with
                                  state defines both (see ``SequenceModel``)
 
+Capabilities a model class declares, so that code outside ``drfkit.models`` asks the model, never
+its kind (a model added in one file declares what it has):
+
+    competency_gain = True       its ``kalman_gains`` are square gains on its state whose diagonal
+                                 says how much a frame's observation moves the belief, so that
+                                 Kalman-gain gating (``drfkit.methods.gating``) scores competency
+                                 on them (the DRF; the known-dynamics filter has gains too, but
+                                 state x observation ones, and is not gated)
+    model.one_node_recursion(w, r), model.recursion_weights()
+                                 its filter recursion on observations w, r as one autograd node,
+                                 and the weights it reads: what
+                                 ``drfkit.methods.timing.recursion_scaling`` times apart from the
+                                 training step (the DRF; None elsewhere)
+
 Training schedules are not the models' business: ``drfkit.study.studies.train_config`` holds them.
 
 Inputs: 'pendulum' uint8 images (B, T, 24, 24); 'keypoints' float32 (B, T, 17, 3).
@@ -152,6 +166,12 @@ class SequenceModel(nn.Module):
     per_frame: bool = False
     #: the methods whose computation the streaming step reproduces frame by frame
     stream_follows: tuple[str, ...] = ("features",)
+    #: True: ``kalman_gains`` are square gains on the state whose diagonal scores competency, and
+    #: Kalman-gain gating (``drfkit.methods.gating``) runs on this model (module docstring)
+    competency_gain: bool = False
+    #: a model whose filter recursion runs as one autograd node defines ``one_node_recursion(w, r)`` and
+    #: ``recursion_weights()`` (``drfkit.models.drf``); None: it has no such recursion to time
+    one_node_recursion = None
     _stream_error: str | None = None  # set per class by __init_subclass__
 
     def __init_subclass__(cls, **kwargs: Any):

@@ -299,6 +299,21 @@ def speedup_vs_monoloco(table: pd.DataFrame, batch: int, threads: int, device: s
     return 1.0 / lookup(table, "pedestrians", "drf", mode, batch, threads, device, "ratio_to_monoloco_published")
 
 
+def device_ratios(table: pd.DataFrame) -> pd.DataFrame:
+    """CPU / GPU time per frame of each (study, model, mode, batch) measured on both, the CPU at its
+    largest thread count of the run (> 1: the GPU is faster); empty when the run saw no GPU."""
+    gpu = table[table["device"].astype(str).str.startswith("cuda")]
+    cpu = table[table["device"] == "cpu"]
+    if gpu.empty or cpu.empty:
+        return pd.DataFrame(columns=["study", "model", "mode", "batch", "cpu_threads", "gpu_over_cpu_speedup"])
+    cpu = cpu[cpu["threads"] == cpu["threads"].max()]
+    keys = ["study", "model", "mode", "batch"]
+    both = cpu.merge(gpu, on=keys, suffixes=("_cpu", "_gpu"))
+    return both.assign(cpu_threads=both["threads_cpu"],
+                       gpu_over_cpu_speedup=both["median_ms_per_frame_cpu"] / both["median_ms_per_frame_gpu"]
+                       )[[*keys, "cpu_threads", "gpu_over_cpu_speedup"]].reset_index(drop=True)
+
+
 # ------------------------------------------------------------------------------ CLI
 def main(argv: list[str] | None = None) -> int:
     """``python -m drfkit bench --profile quick|paper|path.yaml``: run the inference
@@ -317,8 +332,15 @@ def main(argv: list[str] | None = None) -> int:
     table = inference_benchmark(P.uncertainty.n_samples, P.timing.batch_sizes, P.timing.threads,
                                 P.timing.min_run_time, P.device, seed=P.seeds[0],
                                 progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
+    fmt = lambda v: "nan" if math.isnan(v) else f"{v:.4g}"  # noqa: E731
+    print(f"devices measured: {', '.join(sorted(table['device'].astype(str).unique()))} "
+          f"(torch {torch.__version__}; CUDA {'available' if torch.cuda.is_available() else 'not available'})")
     with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
-        print(table.to_string(index=False, float_format=lambda v: "nan" if math.isnan(v) else f"{v:.4g}"))
+        print(table.to_string(index=False, float_format=fmt))
+        ratios = device_ratios(table)
+        if len(ratios):
+            print("GPU over CPU (time per frame, CPU / GPU):")
+            print(ratios.to_string(index=False, float_format=fmt))
     path = atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
     print(f"wrote {path}")
     return 0

@@ -148,15 +148,19 @@ PROTOCOL_COLUMNS = ("r_noise_spearman", "gain_clean", "gain_pure_blackout", "gai
                     "spectral_radius_median")
 
 
-def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, dark: pd.DataFrame) -> pd.DataFrame:
+def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, dark: pd.DataFrame,
+                   pure_noise_training: str | None = None) -> pd.DataFrame:
     """One row per (model, seed) of a protocol: MAE at each test level ('mae_<level>', from
     ``evaluate_study``), on and after the blackout (``blackout_table``) and the mechanism checks
-    (``mechanism_table``; NaN where a model has no filter)."""
+    (``mechanism_table``; NaN where a model has no filter); 'pure_noise_training': why the protocol's
+    training frames include pure noise ('' when none: ``claims.mechanism.pure_noise_training``), so the
+    table says what its models saw."""
     wide = evals.pivot_table(index=["model", "seed"], columns="noise", values="mae")
     wide.columns = [f"mae_{c:g}" for c in wide.columns]
     mech = mechanism.set_index(["model", "seed"]).reindex(columns=list(PROTOCOL_COLUMNS))
     out = wide.join(dark.set_index(["model", "seed"])[["mae_blackout", "mae_after_blackout"]]).join(mech)
-    return out.reset_index().assign(protocol=protocol)[["protocol", "model", "seed", *out.columns]]
+    out = out.reset_index().assign(protocol=protocol, pure_noise_training=pure_noise_training or "")
+    return out[["protocol", "model", "seed", *[c for c in out.columns if c not in ("protocol", "model", "seed")]]]
 
 
 # ------------------------------------------------------------------------------ pedestrians
@@ -319,6 +323,7 @@ def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 20
     most = max(particle_counts)
     rows, conv = [], []
     for name, arrays in steps(sets.items(), "the limit on pixels", len(sets)):
+        name = name if isinstance(name, str) else f"{name:g}"
         images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
         loglik = pixel_bayes.sequence_log_likelihoods(images)
         known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
@@ -329,12 +334,12 @@ def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 20
             "per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
             "template_matching": np.stack([np.cos(theta), np.sin(theta)], axis=-1)}
         for estimator, est in estimates.items():
-            rows.append({"noise": str(name), "estimator": estimator,
+            rows.append({"noise": name, "estimator": estimator,
                          "mae": like_for_like_mae(abs_error_per_frame(est, targets), name),
                          "n_sequences": int(images.shape[0]),
                          "n_particles": most if estimator.startswith("pixel_pf") else 0})
         for count in particle_counts:
             est = pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
-            conv.append({"noise": str(name), "n_particles": count,
+            conv.append({"noise": name, "n_particles": count,
                          "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
     return pd.DataFrame(rows), pd.DataFrame(conv)

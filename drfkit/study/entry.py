@@ -2,9 +2,10 @@
 
 A study is what the models are trained and judged on: its input kind and output size, the models it
 can train, the kind of its noise (``drfkit.data.noise.Noise``), the profile keys that hold its models
-and noise levels, and the callables that make its runs -- its data, what names that data in
-checkpoint hashes, each model's options and schedule under a training protocol, and the fresh
-training data of a protocol that redraws it every epoch. The profile ``P`` is read here and in the
+and noise levels, the paper's claim on Kalman-gain gating it is judged by (``gating_claim``), and the
+callables that make its runs -- its data, what names that data in checkpoint hashes, each model's
+options and schedule under a training protocol, and the fresh training data of a protocol that
+redraws it every epoch. The profile ``P`` is read here and in the
 callables only; what they return (``SequenceData``, a ``TrainConfig``, a dict of model options) is
 what the methods below take.
 
@@ -50,6 +51,10 @@ class Study:
     # (P, protocol, training Noise) -> None, or fresh(epoch) -> SequenceData: the training split drawn anew
     # every epoch
     fresh_training: Callable[[Any, str, Any], Any] = no_fresh_training
+    # the paper's claim on Kalman-gain gating in this study, an id of drfkit.study.claims.efficiency.GATING_CLAIMS
+    # ('C7a': the gate keeps PICP near always-dropout at much less time; 'C7b': no clear gain over random
+    # gating); '' = none, and notebook 06's sweep of the study is judged by no claim
+    gating_claim: str = ""
     noise_name: str = "noise"      # the noise parameter's name on axes ("p" alone reads as a dropout rate)
     target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
     target_unit: str = ""          # its unit, on axes

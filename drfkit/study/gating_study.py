@@ -227,14 +227,29 @@ def selected_fraction(model, gate: Gate, data, device=None) -> float:
     finally:
         model.train(was)
     if gains is None:
-        raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs 'drf'")
+        raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs a model that "
+                         f"declares competency_gain (the DRF, 'drf')")
     real = _real_mask(data).to(device)
     return float(gate.select(gains, real).sum()) / int(real.sum())
 
 
+def gated_models(models: dict) -> dict[int, Any]:
+    """seed -> model, in seed order: the models of ``models`` ((kind, seed) -> model) that Kalman-gain gating
+    runs on, those whose class declares ``competency_gain`` (``drfkit.models.sequence``; of the book's
+    models, the DRF). The gating tables hold one row per seed, so these must be of one kind: several are an
+    error that names them."""
+    gated = {key: m for key, m in models.items() if getattr(m, "competency_gain", False)}
+    kinds = sorted({kind for kind, _ in gated})
+    if len(kinds) > 1:
+        raise ValueError(f"models of several kinds declare competency_gain ({kinds}); the gating tables hold one "
+                         f"gated model per seed: pass the models of one of them")
+    return {seed: m for (_, seed), m in sorted(gated.items())}
+
+
 def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3,
                  val_noise: float | None = None) -> dict[str, pd.DataFrame]:
-    """Fit a gate per DRF seed on validation data, then evaluate and sweep it on the test set.
+    """Fit a gate per DRF seed on validation data, then evaluate and sweep it on the test set (the DRF: the
+    models that declare ``competency_gain``, ``gated_models``).
 
     Test: the ``test`` split at ``evaluation_level``. Validation: the ``val`` split (other
     sequences, other motions / scenes) at ``val_noise``, by default the test's noise level (held-out
@@ -250,9 +265,10 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
 
     registry.study(study)  # a clear error for an unknown study, before any work
     models = models if models is not None else studies.trained_models(P, study)
-    drf = {seed: m for (kind, seed), m in models.items() if kind == "drf"}
+    drf = gated_models(models)
     if not drf:
-        raise ValueError(f"no trained 'drf' model for {study}: gating needs the filter's gains")
+        raise ValueError(f"no trained 'drf' model for {study} (no model that declares competency_gain): gating "
+                         f"needs the filter's gains")
     device = studies.pick_device(P.device)
     level_ = evaluation_level(P, study)
     val_level = level_ if val_noise is None else float(val_noise)
@@ -282,20 +298,17 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
 
 
 def train_noise_gates(P, study: str, models: dict) -> pd.DataFrame:
-    """The gating rule tuned on validation at the *training* noise (pendulum
-    ``pend_train_max_noise``, pedestrians ``ped_train_p``), one row per DRF seed of ``models``:
-    the fraction it picks on validation and the fraction of the test frames at
+    """The gating rule tuned on validation at the *training* noise (the study's ``Study.train_level``:
+    pendulum ``pend_train_max_noise``, pedestrians ``ped_train_p``), one row per DRF seed of ``models``
+    (``gated_models``): the fraction it picks on validation and the fraction of the test frames at
     ``evaluation_level`` its threshold then selects."""
     from drfkit.study import studies
 
-    registry.study(study)  # a clear error for an unknown study
-    train_noise = {"pendulum": P.pendulum.train_max_noise, "pedestrians": P.pedestrians.train_p}[study]
+    train_noise = registry.study(study).train_level(P)  # a clear error for an unknown study
     val = studies.study_data(P, study, "val", train_noise)
     test = studies.study_data(P, study, "test", evaluation_level(P, study))
     rows = []
-    for (kind, seed), model in sorted(models.items()):
-        if kind != "drf":
-            continue
+    for seed, model in gated_models(models).items():
         gate, _ = fit_gate(model, val, n_samples=P.uncertainty.n_samples, tolerance=P.gating.picp_tolerance,
                            n_points=P.gating.sweep_points, level=P.uncertainty.interval_level, seed=seed)
         rows.append({"study": study, "seed": seed, "val_noise": train_noise, "direction": gate.direction,
@@ -315,5 +328,5 @@ def paper_table() -> pd.DataFrame:
 
 __all__ = [
     "timing_subset", "measure_interleaved", "evaluate_gate", "sweep_gate", "split_sweep", "sweep_thresholds",
-    "evaluation_level", "selected_fraction", "gating_study", "train_noise_gates", "paper_table",
+    "evaluation_level", "selected_fraction", "gated_models", "gating_study", "train_noise_gates", "paper_table",
 ]

@@ -26,7 +26,7 @@ import yaml
 
 from drfkit.study.profile import Profile, build_profile
 from drfkit.study.registry import STUDIES
-from drfkit.study.schema import _BY_PATH, PATHS, SCHEMA, SPECS, ParameterError, Section, Spec
+from drfkit.study.schema import _BY_PATH, PATHS, SCHEMA, SPECS, ParameterError, Section
 from drfkit.util.paths import PARAMS_DIR
 
 _COMMON = ["profile", "seeds", "device", "threads"]
@@ -116,16 +116,27 @@ def _coerce(key: str, typ: Any, value: Any, where: str) -> Any:
     raise AssertionError(f"unknown type {typ}")
 
 
-def _registry_options(spec: Spec) -> list[str] | None:
-    """The names a registry-bounded list may hold (``Spec.registry``), None for any other parameter."""
+# Spec.registry -> the field of a study's entry that bounds the list
+_REGISTRY_FIELDS = {"kinds": "kinds", "protocols": "all_protocols"}
+
+
+def _registry_options(key: str) -> list[str] | None:
+    """The names the registry-bounded list ``key`` may hold (``Spec.registry``), None for any other parameter:
+    the studies ('*'), or the model kinds / protocols of every study whose entry reads ``key``'s section
+    (``Study.section``), in registry order."""
+    spec = SPECS[key]
     if not spec.registry:
         return None
-    return list(STUDIES) if spec.registry == "*" else list(STUDIES[spec.registry].kinds)
+    if spec.registry == "*":
+        return list(STUDIES)
+    field = _REGISTRY_FIELDS[spec.registry]
+    studies = [s for s in STUDIES.values() if s.section == PATHS[key][0]]
+    return list(dict.fromkeys(name for s in studies for name in getattr(s, field)))
 
 
 def allowed_text(key: str) -> str:
     """What ``key`` may hold, in words (a registry-bounded list names the registry's names now)."""
-    options = _registry_options(SPECS[key])
+    options = _registry_options(key)
     return SPECS[key].allowed if options is None else SPECS[key].allowed.format(options=options)
 
 
@@ -149,7 +160,7 @@ def validate(notebook: str, values: dict[str, Any]) -> Profile:
     for key in allowed_keys:
         spec = SPECS[key]
         value = _coerce(key, spec.type, values[key], where)
-        options = _registry_options(spec)  # the registry's names when the check runs (a kind a test registered counts)
+        options = _registry_options(key)  # the registry's names when the check runs (a kind a test registered counts)
         if not spec.check(value) or (options is not None and not set(value) <= set(options)):
             raise ParameterError(f"{where}: parameter {_named(key)} = {value!r} is out of range; "
                                  f"allowed: {allowed_text(key)}")

@@ -187,7 +187,7 @@ PEDESTRIANS = Study(
     models_key="models", train_level_key="train_p", eval_levels_key="eval_p", sweep_key="sweep_p",
     training_notebook="03_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="protocols",
     all_protocols=tuple(PEDESTRIAN_PROTOCOLS), data=pedestrian_data, data_key=pedestrian_data_key,
-    model_options=pedestrian_model_options, train_config=pedestrian_train_config,
+    model_options=pedestrian_model_options, train_config=pedestrian_train_config, gating_claim="C7b",
     noise_name="salt-and-pepper p", target_name="depth", target_unit="(m)")
 
 __all__ = ["PEDESTRIANS", "SIMULATOR_VERSION", "load_pedestrians", "load_simulated_pedestrians", "pedestrian_data",

@@ -122,7 +122,8 @@ PENDULUM = Study(
     protocols_key="protocols",
     all_protocols=tuple(PROTOCOLS), data=pendulum_data, data_key=pendulum_data_key,
     model_options=pendulum_model_options, train_config=pendulum_train_config,
-    fresh_training=pendulum_fresh_training, noise_name="max noise", target_unit="(cos θ, sin θ)")
+    fresh_training=pendulum_fresh_training, gating_claim="C7a", noise_name="max noise",
+    target_unit="(cos θ, sin θ)")
 
 __all__ = ["PENDULUM", "PROFILE_SCHEDULE", "SPLIT_SEED_OFFSET", "pendulum_data", "pendulum_data_key",
            "pendulum_fresh_training", "pendulum_model_options", "pendulum_split", "pendulum_train_config",

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, get_origin
 
-from drfkit.methods.protocols import ABLATION_BUDGETS, PEDESTRIAN_PROTOCOLS, PROTOCOLS, VARIANTS
+from drfkit.methods.protocols import ABLATION_BUDGETS, PROTOCOLS, VARIANTS
 
 
 class ParameterError(ValueError):
@@ -28,8 +28,10 @@ class Spec:
     doc: str = ""
     name: str = ""  # the notebook's name for it when it is not the section's prefix + key
     # a list bounded by the registry (drfkit.study.registry), checked by drfkit.study.params when it validates,
-    # so that a kind registered later (by a test, say) is accepted: a study's name for its model kinds, '*' for
-    # the studies themselves; ``allowed`` then says where the names go ('{options}')
+    # so that a kind registered later (by a test, say) is accepted: 'kinds' / 'protocols' for the model kinds
+    # (``Study.kinds``) / training protocols (``Study.all_protocols``) of the studies whose entry reads the
+    # parameter's section (``Study.section``), '*' for the studies themselves; ``allowed`` then says where the
+    # names go ('{options}'). No study is named here: the registry says which study a section is.
     registry: str = ""
 
     @property
@@ -70,10 +72,16 @@ def _names(v: list[str]) -> bool:
     return len(v) > 0 and len(set(v)) == len(v)
 
 
+def _paper_protocols(v: list[str]) -> bool:
+    """Training protocols: the paper's among them, without repeats (the registry bounds the names)."""
+    return "paper" in v and _names(v)
+
+
 _POSITIVE = ("an integer >= 1", lambda v: v >= 1)
 _RATE = ("a number in (0, 1)", lambda v: 0 < v < 1)
 _LEVELS = "a non-empty list of numbers in [0, 1]"
 _SEEDS = "a non-empty list of distinct integers >= 0"
+_PROTOCOLS = "a non-empty subset of {options} that holds 'paper', without repeats"
 
 # The profile's layout: what params/*.yaml hold, section by section. Notebooks (papermill injects
 # top-level names) see the flat names: pendulum.book.epochs is pend_book_epochs.
@@ -92,16 +100,15 @@ SCHEMA = Section("", {
         "eval_max_noise": Spec(list[float], _LEVELS, _levels),
         "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
         "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
-        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty,
-                       registry="pendulum"),
+        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty, registry="kinds"),
         "epochs": Spec(int, *_POSITIVE),
         "batch_size": Spec(int, *_POSITIVE),
         "lr": Spec(float, *_RATE),
         "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
                          "stop a run after this many epochs without a better validation NLL"),
-        "protocols": Spec(list[str], f"a non-empty subset of {list(PROTOCOLS)} that holds 'paper', without repeats",
-                          lambda v: "paper" in v and set(v) <= set(PROTOCOLS) and len(set(v)) == len(v),
-                          "the training protocols notebooks 01 and 02 train and evaluate (drfkit.methods.protocols)"),
+        "protocols": Spec(list[str], _PROTOCOLS, _paper_protocols,
+                          "the training protocols notebooks 01 and 02 train and evaluate (drfkit.methods.protocols)",
+                          registry="protocols"),
         "book": Section("book_", {
             "models": Spec(list[str], "a non-empty list of model kinds the book's protocol names "
                            "(drfkit.methods.protocols.PROTOCOLS['book'])",
@@ -168,16 +175,14 @@ SCHEMA = Section("", {
         "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
         "sim_detector": Spec(dict, "a mapping of DetectorConfig fields (see drfkit.data.sim_detector)",
                              name="sim_detector"),
-        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty,
-                       registry="pedestrians"),
+        "models": Spec(list[str], "a non-empty subset of {options}", _nonempty, registry="kinds"),
         "epochs": Spec(int, *_POSITIVE),
         "batch_size": Spec(int, *_POSITIVE),
         "lr": Spec(float, *_RATE),
-        "protocols": Spec(list[str], f"a non-empty subset of {list(PEDESTRIAN_PROTOCOLS)} that holds 'paper', "
-                                     "without repeats",
-                          lambda v: "paper" in v and set(v) <= set(PEDESTRIAN_PROTOCOLS) and len(set(v)) == len(v),
+        "protocols": Spec(list[str], _PROTOCOLS, _paper_protocols,
                           "the training protocols notebook 03 trains and notebooks 04 and 06 judge "
-                          "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)"),
+                          "(drfkit.methods.protocols.PEDESTRIAN_PROTOCOLS; Monoloco's runs are shared)",
+                          registry="protocols"),
     }, "pedestrian depth: data (simulated or nuScenes + PifPaf), then the DRF family's training"),
     "monoloco": Section("monoloco_", {
         "epochs": Spec(int, *_POSITIVE),

@@ -83,7 +83,7 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # estimates of (cos θ, sin θ) and their σ; the σ scale and an outlier weight are chosen on the
 # validation split at the training noise only. It is what this filter makes of that encoder's outputs
 # -- a reference, not a bound: a model whose encoder is trained through its filter (the DRF) can do
-# better, and the book protocol's DRF does on the blackout -- and it moves with the encoder: each
+# better (the second round's DRF did, on the blackout) -- and it moves with the encoder: each
 # protocol's reference is computed on its own no_dynamics
 # (below, and in "Both protocols side by side"). The *pixel reference* matches every frame against
 # the renderer's own images at 4096 angles (normalised correlation): what a single frame holds,
@@ -142,14 +142,23 @@ fig = plot_pixel_limit(limit, model_mae)
 save_figure(P.profile, "pendulum_pixel_limit", fig)
 plt.show()
 
+# %%
+# NBVAL_IGNORE_OUTPUT
+for lv in P.pendulum.eval_max_noise:
+    key = f"{lv:g}"
+    print(f"max noise {key}: the limit {by_set.loc['pixel_pf', key]:.4f}, per frame {by_set.loc['per_frame_bayes', key]:.4f}, "
+          f"the paper's DRF {PENDULUM_MAE[lv]['drf']:.4f} ({PENDULUM_MAE[lv]['drf'] / by_set.loc['pixel_pf', key]:.1f}x the "
+          f"limit); this profile's: " + ", ".join(f"{k} {v[key]:.4f} ({v[key] / by_set.loc['pixel_pf', key]:.1f}x)"
+                                                  for k, v in model_mae.items()))
+print(f"blackout: the limit {by_set.loc['pixel_pf', 'blackout']:.4f}, per frame {by_set.loc['per_frame_bayes', 'blackout']:.4f}")
+
 # %% [markdown]
-# In the paper profile (40 test sequences) the limit sits at about 0.002 on clean frames, at max noise 0.5
-# and at 0.75; per frame, without dynamics, the posterior mean loses almost nothing up to 0.75: at the
-# training noise one frame holds nearly all there is to know, and the dynamics pay on frames worse than
-# that (max noise 1.0, the blackout). The paper's DRF at 0.5 (0.0046) is about twice the limit:
-# physically plausible. Every learned model of this profile is several times the per-frame posterior
-# mean even on clean frames: the encoder, not the filter, is where most of the error is (the third
-# ablation round below probes why).
+# What the limit says. Per frame, without dynamics, the posterior mean loses little up to max noise 0.75:
+# at the training noise one frame holds nearly all there is to know, and the dynamics pay on frames worse
+# than that (max noise 1.0, the blackout). The ratios above put every model beside it: the paper's DRF at
+# 0.5 and this profile's models, whose distance from the per-frame posterior even inside the training
+# range says the encoder, not the filter, is where most of their error is (the third ablation round
+# below probes why).
 
 # %% [markdown]
 # ### Could a filter reach the paper's DRF from homoscedastic errors as large as the paper's no_dynamics'?
@@ -382,9 +391,10 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 
 # %% [markdown]
 # ## Both protocols side by side
-# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the second round's
-# choice for the DRF, the same recipe and training data for the LSTM and no_dynamics, each on the
-# book's schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
+# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the third round's
+# choice for the DRF, trained without pure-noise frames, with the wider encoder, and the same recipe,
+# encoder and training data for the LSTM, no_dynamics and the known-dynamics filter, each on the book's
+# schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
 # the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
 # here; `python -m drfkit train --profile paper --study pendulum --protocol book --threads 1`
 # trains (or resumes) its runs.
@@ -404,15 +414,18 @@ for protocol in P.pendulum.protocols:
         bounds[protocol] = cached(P.profile, dynamics.physics_bound, P,
                                   {seed: m for (kind, seed), m in trained.items() if kind == "no_dynamics"},
                                   P.pendulum.eval_max_noise, n_particles=P.dynamics.bound_particles, timing=False)[0]
-protocols = pd.concat([dynamics.protocol_table(name, *parts) for name, parts in pieces.items()], ignore_index=True)
+from drfkit.study.claims.mechanism import pure_noise_training
+
+protocols = pd.concat([dynamics.protocol_table(name, *parts, pure_noise_training=pure_noise_training(name))
+                       for name, parts in pieces.items()], ignore_index=True)
 save_table(P.profile, "pendulum_protocols", protocols)
 protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).drop(columns="seed").round(4)
 
 # %% [markdown]
 # Each protocol's true-physics reference, on its own no_dynamics (seed means; the blackout's over the
 # blackout frames, as the models'), and the DRF's MAE over it: the learned filter against what the
-# particle filter with the exact physics makes of no_dynamics' outputs (below 1: the DRF does better,
-# as the book protocol's does on the blackout; the columns keep the name `bound`).
+# particle filter with the exact physics makes of no_dynamics' outputs (below 1: the DRF does better;
+# the columns keep the name `bound`).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -430,7 +443,8 @@ pd.DataFrame({f"drf / bound at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" els
 # %%
 by_protocol = pd.concat([c.assign(protocol=name) for name, c in dark_curves.items()]
                         + [bound_curves.assign(protocol=None)], ignore_index=True)
-fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
+every_kind = list(dict.fromkeys(k for pr in P.pendulum.protocols for k in studies.study_models(P, "pendulum", pr)))
+fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), every_kind + ["physics_bound"])
 save_figure(P.profile, "pendulum_blackout_protocols", fig)
 plt.show()
 
@@ -440,10 +454,11 @@ plt.show()
 # correlation ρ of r with the noise ≥ 0.8, gain on pure noise ≤ ¼ of that on clean frames, F z predicts
 # better than z; a ρ ≤ 0 is r *not* following frame quality, and fails F1 whatever the other two say),
 # and **F2**, its state coasts (blackout MAE ≤ 0.10; the reference on the same protocol's no_dynamics
-# beside it). F2 is labelled by the protocol's training frames: the book protocol trains with 5–20-frame
-# pure-noise blackouts in half its sequences, so for it the blackout is **in distribution** (coasting is
-# trained, and the LSTM trained the same way coasts too); under the paper protocol it is out of
-# distribution. Both rows are judged from `pendulum_protocols.csv` and
+# beside it). F2 is labelled by the protocol's training frames: a protocol that trains on pure-noise
+# frames (the second round's, with 5–20-frame blackouts in half its sequences) makes the blackout an
+# **in-distribution** test, where coasting is trained and an LSTM trained the same way coasts too; the
+# book's protocol now trains without any (the third round), so for it, as for the paper's, the blackout
+# is out of distribution. Both rows are judged from `pendulum_protocols.csv` and
 # `pendulum_physics_bound_protocols.csv` (`drfkit.study.claims.judge`).
 
 # %%

@@ -249,7 +249,7 @@ claims_table = judge.write(P, [cid for cid, c in claims.CLAIMS.items() if c.note
 for study, protocol in GROUPS:
     # the verdicts are in the table below, which nbval does not compare: C7a's time test rests on measured times,
     # which differ between machines, C7b's on the pedestrians' quick models, whose numbers differ between CPU families
-    print(f"claim written: {'C7a' if study == 'pendulum' else 'C7b'} ({protocol} protocol)")
+    print(f"claim written: {registry.study(study).gating_claim} ({protocol} protocol)")
 
 # %%
 # NBVAL_IGNORE_OUTPUT

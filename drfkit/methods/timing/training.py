@@ -95,7 +95,7 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
 
     Times in one interleaved run (``interleaved_times``, at ``threads``): a training step
     of the base model and of the DRF on ``inputs`` (B, T, ...) and ``targets`` (B, T, out),
-    and the DRF's recursion alone (``drf_recursion`` forward and backward, unit upstream
+    and the DRF's recursion alone (its ``one_node_recursion`` forward and backward, unit upstream
     gradients) on the DRF's encoder outputs for these inputs, tiled to each batch size of
     ``sizes`` (default (B // 2, B, 2 B); B is always added). A least-squares line
     t(b) = fixed + per_sequence * b through the recursion's median times splits it into a
@@ -110,12 +110,15 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
     recursion calling the same kernels could reach at best. ``ratio`` is the plain median of
     per-round DRF/base step ratios of the same run.
 
-    Returns rows (model, part) = (base kind, 'step'), ('drf', 'step') and ('drf', 'recursion')
-    per size, with columns batch, frames, threads, rounds, median_s, iqr_s, fit_s (recursion
-    rows), fixed_s, per_sequence_s, ratio and floor_ratio (DRF step row; NaN elsewhere).
+    ``drf_config`` builds any model that declares a one-node recursion (``one_node_recursion`` and
+    ``recursion_weights``, ``drfkit.models.sequence``): the DRF.
+
+    Returns rows (model, part) = (base kind, 'step'), (filter kind, 'step') and (filter kind,
+    'recursion') per size, with columns batch, frames, threads, rounds, median_s, iqr_s, fit_s
+    (recursion rows), fixed_s, per_sequence_s, ratio and floor_ratio (the filter's step row; NaN
+    elsewhere).
     """
     from drfkit.models import build_model
-    from drfkit.models.recursion import drf_recursion
 
     batch = int(inputs.shape[0])
     if targets.shape[0] != batch:
@@ -126,12 +129,13 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
                          f"got {sizes}")
     torch.manual_seed(seed)
     base, drf = build_model(base_config).train(), build_model(drf_config).train()
-    if drf.kind != "drf":
-        raise ValueError(f"drf_config must build a DRF, got kind {drf.kind!r}")
+    if drf.one_node_recursion is None:
+        raise ValueError(f"drf_config must build a DRF (a model that declares one_node_recursion), got kind "
+                         f"{drf.kind!r}")
 
     with torch.no_grad():
         w, r = drf.observe(inputs)  # (B, T, n) each: realistic observations for the filter
-    weights = list(drf.transition.parameters())
+    weights = drf.recursion_weights()
 
     def recursion(b):
         reps = -(-b // batch)
@@ -140,7 +144,7 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
         ones = torch.ones_like(w_b)
 
         def run():
-            z, p = drf_recursion(drf.transition, w_b, r_b)
+            z, p = drf.one_node_recursion(w_b, r_b)
             return torch.autograd.grad((z, p), [w_b, r_b, *weights], (ones, ones))
         return run
 
@@ -154,8 +158,8 @@ def recursion_scaling(base_config: dict[str, Any], drf_config: dict[str, Any], i
     fixed, per_sequence = fit_fixed_and_per_item(sizes, [medians[f"recursion_{b}"] for b in sizes])
     floor = (times["drf"] - times[f"recursion_{batch}"] + per_sequence * batch) / times["base"]
     rows = []
-    for key, model, part, b in ([("base", base.kind, "step", batch), ("drf", "drf", "step", batch)]
-                                + [(f"recursion_{b}", "drf", "recursion", b) for b in sizes]):
+    for key, model, part, b in ([("base", base.kind, "step", batch), ("drf", drf.kind, "step", batch)]
+                                + [(f"recursion_{b}", drf.kind, "recursion", b) for b in sizes]):
         q1, q3 = np.quantile(times[key], [0.25, 0.75])
         rows.append({"model": model, "part": part, "batch": b, "frames": int(inputs.shape[1]),
                      "threads": threads, "rounds": len(times[key]), "median_s": medians[key],

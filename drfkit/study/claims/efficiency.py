@@ -3,7 +3,8 @@ whether the Kalman gain tells which frames need it (C7, the gating sweep of note
 from __future__ import annotations
 
 import math
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import pandas as pd
 
@@ -114,14 +115,22 @@ def _tuned_reference(tuned: dict[str, pd.DataFrame] | None, study: str) -> str:
     return ("; gates tuned on validation (a reference, not judged): " + "; ".join(parts)) if parts else ""
 
 
-def _paper_gating(study: str) -> str:
-    """The paper's gating row of ``study`` as the claims table quotes it (``paper.GATING``)."""
-    g = paper.GATING[study]  # setting -> (PICP %, MPIW, time ms)
-    share = 100 * (1 - g["no_dropout"][2] / g["always"][2])
-    if study == "pendulum":
-        return (f"{g['kalman_gain'][0]:.1f} % vs {g['always'][0]:.1f} % (always) at {g['kalman_gain'][2]:.1f} vs "
-                f"{g['always'][2]:.1f} ms; random {g['random'][0]:.1f} % (KG - random "
-                f"{g['kalman_gain'][0] - g['random'][0]:+.1f} points); MC dropout {share:.0f} % of the per-frame cost")
+def _paper_share(g: dict) -> float:
+    """MC dropout's share of the per-frame cost in a paper gating row (setting -> (PICP %, MPIW, time ms)), in %."""
+    return 100 * (1 - g["no_dropout"][2] / g["always"][2])
+
+
+def _quote_c7a(g: dict) -> str:
+    """The paper's gating row ``g`` (``paper.GATING``: setting -> (PICP %, MPIW, time ms)) as C7a quotes it:
+    PICP and time beside always-dropout."""
+    return (f"{g['kalman_gain'][0]:.1f} % vs {g['always'][0]:.1f} % (always) at {g['kalman_gain'][2]:.1f} vs "
+            f"{g['always'][2]:.1f} ms; random {g['random'][0]:.1f} % (KG - random "
+            f"{g['kalman_gain'][0] - g['random'][0]:+.1f} points); MC dropout {_paper_share(g):.0f} % of the per-frame "
+            "cost")
+
+
+def _quote_c7b(g: dict) -> str:
+    """The paper's gating row ``g`` as C7b quotes it: Kalman-gain against random gating."""
     return (f"{g['kalman_gain'][0]:.1f} % (KG) vs {g['random'][0]:.1f} % (random): "
             f"{g['kalman_gain'][0] - g['random'][0]:+.1f} points")
 
@@ -130,16 +139,101 @@ _SWEEP_WORDS = (f"KG - random = PICP of Kalman-gain minus random gating at equal
                 f"over the sweep's fractions {C7_FRACTIONS[0]:g}-{C7_FRACTIONS[1]:g} (validation-score quantiles: "
                 "no threshold is tuned), mean over seeds with a 95 % t-interval")
 
+Interval = tuple[float, float, float]
+
+
+def _judge_c7a(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None, gain: Interval, room: Interval,
+               ours: str, reference: str) -> tuple[str, str]:
+    """C7a's verdict and 'ours': KG - random above 0, and the time test where MC dropout dominates the cost."""
+    time_note, time_ok = "time test not measured (no settings table)", None
+    if settings is not None:
+        share = sampling_share(settings, study)
+        if share < C7_MIN_SAMPLING_SHARE:
+            time_note = (f"time test not applicable on this machine: MC dropout is {100 * share:.0f}% of the "
+                         f"per-frame cost here (the paper's: 91 %), so even gating no frame cannot save a "
+                         f"quarter of always-dropout's time")
+        else:
+            time_ok, words = _time_test(sweep, settings, study)
+            time_note = f"time test {'passed' if time_ok else 'failed'}: {words} (MC dropout {100 * share:.0f}% of the cost)"
+    beats = gain[1] > 0  # NaN (one seed) compares False
+    verdict = (REPRODUCED if beats and time_ok is not False else
+               PARTLY if gain[0] > 0 else NOT)
+    return verdict, f"{ours}; {time_note}{reference}"
+
+
+def _judge_c7b(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None, gain: Interval, room: Interval,
+               ours: str, reference: str) -> tuple[str, str]:
+    """C7b's verdict and 'ours': KG - random within the no-gain band, unless even an oracle could not leave it."""
+    band = C7_NO_GAIN_BAND
+    if not math.isnan(room[0]) and at_most(room[0], band):
+        return NOT_TESTABLE, f"{ours}: even a perfect gate is within {100 * band:g} point of random here{reference}"
+    inside = at_most(abs(gain[1]), band) and at_most(abs(gain[2]), band)  # NaN bounds: not inside
+    verdict = REPRODUCED if inside else PARTLY if at_most(abs(gain[0]), band) else NOT
+    return verdict, ours + reference
+
+
+@dataclass(frozen=True)
+class GatingClaim:
+    """One of the paper's claims on Kalman-gain gating; a study's registry entry names the one it is judged by
+    (``Study.gating_claim``)."""
+    id: str
+    paper_study: str  # the study of the paper the claim is about (its row of ``paper.GATING``)
+    claim: str
+    quote: Callable[[dict], str]  # the paper's row of ``paper_study`` in ``paper.GATING`` -> the claims table's words
+    rule: str
+    # (sweep, study, settings, KG - random, oracle - random, 'ours' so far, tuned reference) -> (verdict, ours)
+    judge: Callable[..., tuple[str, str]]
+
+    def row(self, verdict: str, ours: str) -> dict[str, Any]:
+        return {"id": self.id, "claim": self.claim, "paper": self.quote(paper.GATING[self.paper_study]), "ours": ours,
+                "rule": self.rule, "verdict": verdict}
+
+
+GATING_CLAIMS: dict[str, GatingClaim] = {c.id: c for c in (
+    GatingClaim("C7a", "pendulum", "Pendulum: Kalman-gain gating keeps PICP near always-dropout at much less time", _quote_c7a,
+                f"{_SWEEP_WORDS}; time test, applicable where MC dropout is at least "
+                f"{100 * C7_MIN_SAMPLING_SHARE:.0f} % of the per-frame cost (1 - time without dropout / time "
+                f"always; the paper's: 91 %): the Kalman-gain curve reaches PICP within "
+                f"{100 * C7_NEAR_ALWAYS:g} points of always-dropout at <= {C7_TIME_RATIO:g} x its time; "
+                "reproduced: the interval of KG - random is above 0 and the time test passes or is not "
+                "applicable (then the verdict is on coverage alone, and says so); partly: KG - random above "
+                "0 in the seed mean only, or the time test fails; else not reproduced; not testable "
+                "without sweep rows", _judge_c7a),
+    GatingClaim("C7b", "pedestrians", "Pedestrians: Kalman-gain gating brings no clear gain over random gating", _quote_c7b,
+                f"{_SWEEP_WORDS}; reproduced: the interval lies within +/- {100 * C7_NO_GAIN_BAND:g} point "
+                "(no gain, beyond seed noise; the paper's gap is 0.3 points); partly: the mean within it, the "
+                "interval not; else not reproduced; not testable when an oracle gate (the frames of largest "
+                f"true error, same count) beats random by at most {100 * C7_NO_GAIN_BAND:g} point: then no gate "
+                "could be told from random", _judge_c7b),
+)}
+
+
+def gating_claim(study: str, claim: str | None = None) -> GatingClaim:
+    """``GATING_CLAIMS[claim]``; without ``claim``, the paper's claim on the study named ``study`` (for a study
+    of the registry, ``drfkit.study.claims.judge`` passes its entry's ``Study.gating_claim``)."""
+    if claim is None:
+        found = [c for c in GATING_CLAIMS.values() if c.paper_study == study]
+        if not found:
+            raise ValueError(f"the paper makes no gating claim on {study!r} (it makes "
+                             f"{ {c.id: c.paper_study for c in GATING_CLAIMS.values()} }): name one of "
+                             f"{sorted(GATING_CLAIMS)}")
+        return found[0]
+    if claim not in GATING_CLAIMS:
+        raise ValueError(f"unknown gating claim {claim!r}; known: {sorted(GATING_CLAIMS)}")
+    return GATING_CLAIMS[claim]
+
 
 def c7_gating(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None = None,
-              tuned: dict[str, pd.DataFrame] | None = None) -> dict[str, Any]:
-    """C7a (pendulum: the gain beats random gating and, where MC dropout dominates the cost, keeps PICP
-    near always-dropout at much less time) or C7b (pedestrians: no clear gain over random), judged on
-    the threshold sweep of one training protocol (``gating_study``'s sweep: method in {kalman_gain,
-    random, oracle}, seed, val_fraction, fraction, picp, time_ms).
+              tuned: dict[str, pd.DataFrame] | None = None, claim: str | None = None) -> dict[str, Any]:
+    """The gating claim ``claim`` (``gating_claim``; default: the paper's on ``study``) on ``study``'s rows:
+    C7a, the pendulum's, the gain beats random gating and, where MC dropout dominates the cost, keeps PICP
+    near always-dropout at much less time; C7b, the pedestrians', no clear gain over random. Judged on the
+    threshold sweep of one training protocol (``gating_study``'s sweep: method in {kalman_gain, random,
+    oracle}, seed, val_fraction, fraction, picp, time_ms).
 
     settings: the four settings' summary (no_dropout, always, ... with time_ms, picp) for the time
     test; tuned: name -> settings summary of a gate tuned on validation, reported as a reference."""
+    rule = gating_claim(study, claim)
     gain = sweep_gain(sweep, study)
     room = sweep_gain(sweep, study, method="oracle")
     ours = f"KG - random {fmt_interval(gain, 100, 2, True, ' pt')}"
@@ -147,54 +241,10 @@ def c7_gating(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None = N
              if not math.isnan(room[0]) else "; oracle curve not in this sweep (notebook 06 adds it)")
     reference = _tuned_reference(tuned, study)
     if math.isnan(gain[0]):
-        return _c7_row(study, NOT_TESTABLE, "no sweep rows between never and always" + reference)
-    if study == "pendulum":
-        time_note, time_ok = "time test not measured (no settings table)", None
-        if settings is not None:
-            share = sampling_share(settings, study)
-            if share < C7_MIN_SAMPLING_SHARE:
-                time_note = (f"time test not applicable on this machine: MC dropout is {100 * share:.0f}% of the "
-                             f"per-frame cost here (the paper's: 91 %), so even gating no frame cannot save a "
-                             f"quarter of always-dropout's time")
-            else:
-                time_ok, words = _time_test(sweep, settings, study)
-                time_note = f"time test {'passed' if time_ok else 'failed'}: {words} (MC dropout {100 * share:.0f}% of the cost)"
-        beats = gain[1] > 0  # NaN (one seed) compares False
-        verdict = (REPRODUCED if beats and time_ok is not False else
-                   PARTLY if gain[0] > 0 else NOT)
-        return _c7_row(study, verdict, f"{ours}; {time_note}{reference}")
-    band = C7_NO_GAIN_BAND
-    if not math.isnan(room[0]) and at_most(room[0], band):
-        return _c7_row(study, NOT_TESTABLE, f"{ours}: even a perfect gate is within {100 * band:g} point of random "
-                                            f"here{reference}")
-    inside = at_most(abs(gain[1]), band) and at_most(abs(gain[2]), band)  # NaN bounds: not inside
-    verdict = REPRODUCED if inside else PARTLY if at_most(abs(gain[0]), band) else NOT
-    return _c7_row(study, verdict, ours + reference)
-
-
-def _c7_row(study: str, verdict: str, ours: str) -> dict[str, Any]:
-    if study == "pendulum":
-        return {"id": "C7a", "claim": "Pendulum: Kalman-gain gating keeps PICP near always-dropout at much less time",
-                "paper": _paper_gating("pendulum"), "ours": ours,
-                "rule": f"{_SWEEP_WORDS}; time test, applicable where MC dropout is at least "
-                        f"{100 * C7_MIN_SAMPLING_SHARE:.0f} % of the per-frame cost (1 - time without dropout / time "
-                        f"always; the paper's: 91 %): the Kalman-gain curve reaches PICP within "
-                        f"{100 * C7_NEAR_ALWAYS:g} points of always-dropout at <= {C7_TIME_RATIO:g} x its time; "
-                        "reproduced: the interval of KG - random is above 0 and the time test passes or is not "
-                        "applicable (then the verdict is on coverage alone, and says so); partly: KG - random above "
-                        "0 in the seed mean only, or the time test fails; else not reproduced; not testable "
-                        "without sweep rows",
-                "verdict": verdict}
-    return {"id": "C7b", "claim": "Pedestrians: Kalman-gain gating brings no clear gain over random gating",
-            "paper": _paper_gating("pedestrians"), "ours": ours,
-            "rule": f"{_SWEEP_WORDS}; reproduced: the interval lies within +/- {100 * C7_NO_GAIN_BAND:g} point "
-                    "(no gain, beyond seed noise; the paper's gap is 0.3 points); partly: the mean within it, the "
-                    "interval not; else not reproduced; not testable when an oracle gate (the frames of largest "
-                    f"true error, same count) beats random by at most {100 * C7_NO_GAIN_BAND:g} point: then no gate "
-                    "could be told from random",
-            "verdict": verdict}
+        return rule.row(NOT_TESTABLE, "no sweep rows between never and always" + reference)
+    return rule.row(*rule.judge(sweep, study, settings, gain, room, ours, reference))
 
 
 __all__ = ["C6_TOLERANCE", "TIMING_SPEEDUP_TARGET", "SAMPLING_OVERHEAD_TARGET", "c6_speedup", "speedup_spread",
            "C7_FRACTIONS", "C7_NO_GAIN_BAND", "C7_NEAR_ALWAYS", "C7_TIME_RATIO", "C7_MIN_SAMPLING_SHARE",
-           "sweep_gain", "sampling_share", "c7_gating"]
+           "sweep_gain", "sampling_share", "GatingClaim", "GATING_CLAIMS", "gating_claim", "c7_gating"]

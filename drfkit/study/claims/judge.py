@@ -71,7 +71,8 @@ def judge_ood(P) -> Rows:
         judged = [(s, protocol if protocol in protocols[s] else "paper") for s in studies]
         if ("pendulum", protocol) in judged:
             by_seed = _part(evals, "pendulum", protocol)
-            by_seed = by_seed[by_seed["dropout_p"].eq(by_seed["dropout_p"].iloc[0])]  # each model's default rate
+            # each model at its own default rate (models differ: a filter read without a decoder has none)
+            by_seed = by_seed[by_seed["dropout_p"].eq(by_seed.groupby("model")["dropout_p"].transform("first"))]
             rows += [(protocol, accuracy.c1_pendulum_mae_ordering(_at(_part(summary, "pendulum", protocol),
                                                                       paper_noise["pendulum"]),
                                                                   paper_noise["pendulum"], by_seed=by_seed)),
@@ -111,7 +112,7 @@ def judge_dynamics(P) -> Rows:
                if refs is not None else pd.Series(dtype=float))
         rows += [(protocol, mechanism.f1_filter_mechanism(part, level)),
                  (protocol, mechanism.f2_blackout_coasting(part, ref.to_numpy(dtype=float),
-                                                           in_distribution=mechanism.pure_noise_training(protocol)))]
+                                                           in_distribution=mechanism.training_label(part)))]
     return rows
 
 
@@ -144,15 +145,19 @@ def judge_timing(P) -> Rows:
 
 # ------------------------------------------------------------------------------ notebook 06
 def judge_gating(P) -> Rows:
-    """C7a (pendulum) and C7b (pedestrians) per protocol, on the threshold sweep (``gating_sweep.csv``);
-    the settings summary (``gating_summary.csv``, the same run) gives the time test, and the gates tuned
-    on validation at the test and at the training noise are reported as references."""
+    """Each study's gating claim (``Study.gating_claim``: C7a for the pendulum, C7b for the pedestrians) per
+    protocol, on the threshold sweep (``gating_sweep.csv``); the settings summary (``gating_summary.csv``,
+    the same run) gives the time test, and the gates tuned on validation at the test and at the training
+    noise are reported as references. A study whose entry names no gating claim gives no row."""
     sweep, settings = _read(P, "gating_sweep"), _read(P, "gating_summary")
     if sweep is None:
         return []
     trained = _read(P, "gating_summary_train_noise")
     rows: Rows = []
     for study in P.evaluation.studies:
+        claim = registry.study(study).gating_claim
+        if not claim:
+            continue
         for protocol in registry.study(study).protocols(P):
             part = _part(sweep, study, protocol)
             if part.empty:
@@ -160,7 +165,7 @@ def judge_gating(P) -> Rows:
             pick = lambda t: None if t is None else _part(t, study, protocol)  # noqa: E731
             tuned = {k: v for k, v in (("tuned at the test noise", pick(settings)),
                                        ("tuned at the training noise", pick(trained))) if v is not None}
-            rows.append((protocol, efficiency.c7_gating(part, study, pick(settings), tuned)))
+            rows.append((protocol, efficiency.c7_gating(part, study, pick(settings), tuned, claim=claim)))
     return rows
 
 

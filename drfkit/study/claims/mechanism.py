@@ -44,6 +44,23 @@ def f1_filter_mechanism(mechanism: pd.DataFrame, noise: float) -> dict[str, Any]
             "verdict": verdict}
 
 
+# the label of a table made before it recorded its training frames (``pure_noise_training`` column)
+UNKNOWN_TRAINING = ("in or out of distribution unknown (the table predates the record of its training frames; "
+                    "rerun notebook 02)")
+
+
+def training_label(table: pd.DataFrame) -> str | None:
+    """What a protocol table says of its models' training frames: its ``pure_noise_training`` column
+    (written by notebook 02 from the recipe the checkpoints were trained with; '' = none), or
+    ``UNKNOWN_TRAINING`` for a table without the column."""
+    if "pure_noise_training" not in table:
+        return UNKNOWN_TRAINING
+    values = {str(v) for v in table["pure_noise_training"].fillna("")}
+    if len(values) != 1:
+        raise ValueError(f"a protocol's table holds several training-frame records: {sorted(values)}")
+    return values.pop() or None
+
+
 def pure_noise_training(protocol: str) -> str | None:
     """Why the DRF of ``protocol`` sees pure-noise frames in training (``drfkit.methods.protocols``:
     blackouts, or a max noise of 1.0, where a frame can be all noise), or None when it never does:
@@ -75,7 +92,8 @@ def f2_blackout_coasting(blackout: pd.DataFrame, reference, target: float = F2_B
     ref = seed_interval([reference] if isinstance(reference, (int, float)) else list(reference))
     verdict = (REPRODUCED if at_most(drf[0], target)
                else PARTLY if drf[0] < min((v[0] for v in others.values()), default=math.inf) else NOT)
-    where = (f"in distribution ({in_distribution})" if in_distribution else
+    where = (UNKNOWN_TRAINING if in_distribution == UNKNOWN_TRAINING else
+             f"in distribution ({in_distribution})" if in_distribution else
              "out of distribution (no training frame of this protocol is pure noise)")
     return {"id": "F2", "claim": "The DRF's state coasts through 15 pure-noise frames",
             "paper": "implied by the method (the prior carries the state when the gain falls)",
@@ -92,4 +110,4 @@ def f2_blackout_coasting(blackout: pd.DataFrame, reference, target: float = F2_B
 
 
 __all__ = ["F1_RANK_CORRELATION", "F1_GAIN_RATIO", "F1_PREDICTION_RATIO", "F2_BLACKOUT_MAE",
-           "f1_filter_mechanism", "pure_noise_training", "f2_blackout_coasting"]
+           "f1_filter_mechanism", "pure_noise_training", "training_label", "UNKNOWN_TRAINING", "f2_blackout_coasting"]
