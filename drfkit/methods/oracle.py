@@ -104,19 +104,30 @@ def pendulum_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, *, n_p
             log_like = np.logaddexp(math.log1p(-outlier) + log_gauss, math.log(outlier / 4.0))
         else:
             log_like = log_gauss
-        log_w = log_w + log_like
-        log_w -= log_w.max(axis=1, keepdims=True)
-        w = np.exp(log_w)
-        w /= w.sum(axis=1, keepdims=True)
+        log_w, w = normalised_weights(log_w + log_like)
         out[:, t] = np.einsum("nm,nmk->nk", w, pred)
-        ess = 1.0 / (w ** 2).sum(axis=1)
-        low = ess < RESAMPLE_BELOW * n_particles
-        if low.any():
-            idx = _systematic_resample(w[low], rng)
-            theta[low] = np.take_along_axis(theta[low], idx, axis=1)
-            vel[low] = np.take_along_axis(vel[low], idx, axis=1)
-            log_w[low] = 0.0
+        log_w = resample_degenerate(w, log_w, (theta, vel), rng)
     return out
+
+
+def normalised_weights(log_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Log weights (N, M) shifted to a row maximum of 0, and the normalised weights w (N, M)."""
+    log_w = log_w - log_w.max(axis=1, keepdims=True)
+    w = np.exp(log_w)
+    return log_w, w / w.sum(axis=1, keepdims=True)
+
+
+def resample_degenerate(w: np.ndarray, log_w: np.ndarray, states: tuple[np.ndarray, ...],
+                        rng: np.random.Generator) -> np.ndarray:
+    """Systematic resampling of the rows whose effective sample size fell below ``RESAMPLE_BELOW`` of M:
+    each state array (N, M) of ``states`` is resampled in place; returns log_w with those rows reset to 0."""
+    low = 1.0 / (w ** 2).sum(axis=1) < RESAMPLE_BELOW * w.shape[1]
+    if low.any():
+        idx = _systematic_resample(w[low], rng)
+        for state in states:
+            state[low] = np.take_along_axis(state[low], idx, axis=1)
+        log_w = np.where(low[:, None], 0.0, log_w)
+    return log_w
 
 
 def calibrate_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, targets: np.ndarray, *,

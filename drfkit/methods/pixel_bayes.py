@@ -31,7 +31,7 @@ import torch
 
 from drfkit.data import pendulum as pend
 from drfkit.data.rod_bank import rod_bank
-from drfkit.methods.oracle import RESAMPLE_BELOW, _systematic_resample, pendulum_propagate
+from drfkit.methods.oracle import normalised_weights, pendulum_propagate, resample_degenerate
 
 FLOOR = 1e-4
 # the marginal over an unknown level: l = 0 and 128 levels up to 1, equally likely a priori
@@ -175,19 +175,10 @@ def pixel_particle_filter(loglik: np.ndarray, *, n_particles: int = 2000, seed: 
         idx = bank.lookup(theta)                                        # (N, M); -1: a tip outside the bank
         frame = loglik[:, t]
         like = np.where(idx >= 0, frame[rows, np.maximum(idx, 0)], frame.min(1, keepdims=True))
-        log_w = log_w + like
-        log_w -= log_w.max(axis=1, keepdims=True)
-        w = np.exp(log_w)
-        w /= w.sum(axis=1, keepdims=True)
+        log_w, w = normalised_weights(log_w + like)
         out[:, t, 0] = (w * np.cos(theta)).sum(1)
         out[:, t, 1] = (w * np.sin(theta)).sum(1)
-        ess = 1.0 / (w ** 2).sum(axis=1)
-        low = ess < RESAMPLE_BELOW * n_particles
-        if low.any():
-            pick = _systematic_resample(w[low], rng)
-            theta[low] = np.take_along_axis(theta[low], pick, axis=1)
-            vel[low] = np.take_along_axis(vel[low], pick, axis=1)
-            log_w[low] = 0.0
+        log_w = resample_degenerate(w, log_w, (theta, vel), rng)
     return out
 
 
