@@ -23,7 +23,6 @@ DRF family's head takes). ``observation_output`` (w_t, sqrt r_t) is what an obse
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import torch
@@ -124,15 +123,16 @@ class KnownDynamicsFilter(SequenceModel):
         return x, P
 
     def _step(self, x, P, w, r):
-        """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F, prior x."""
+        """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F and the prior
+        (x, P) before the update."""
         theta, omega, F = pendulum_step(x[:, 0], x[:, 1])
         prior = torch.stack([theta, omega], -1)
-        P = F @ P @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior))
+        p_prior = F @ P @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior))
         s, c = torch.sin(theta), torch.cos(theta)
         zero = torch.zeros_like(theta)
         H = torch.stack([torch.stack([-s, zero], -1), torch.stack([c, zero], -1)], -2)       # (B, 2, 2)
-        x, P, K = ekf_update(prior, P, w - torch.stack([c, s], -1), H, r)
-        return x, P, K, F, prior
+        x, P, K = ekf_update(prior, p_prior, w - torch.stack([c, s], -1), H, r)
+        return x, P, K, F, (prior, p_prior)
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
                      return_prior: bool = False) -> dict[str, torch.Tensor]:
@@ -150,14 +150,13 @@ class KnownDynamicsFilter(SequenceModel):
             eye[:, 0, 1] = torch.cos(x[:, 0])
             Ks.append(eye)
         for t in range(1, w.shape[1]):
-            p_before = P
-            x, P, K, F, prior = self._step(x, P, w_steps[t], r_steps[t])
+            x, P, K, F, (prior, p_prior) = self._step(x, P, w_steps[t], r_steps[t])
             xs.append(x), Ps.append(P)
             if return_gains:
                 Ks.append(K), Fs.append(F)
             if return_prior:
                 priors.append(prior)
-                prior_ps.append(F @ p_before @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior)))
+                prior_ps.append(p_prior)
         out = {"x": torch.stack(xs, 1), "p": torch.stack(Ps, 1)}
         if return_gains:
             out["gains"] = torch.stack(Ks, 1)

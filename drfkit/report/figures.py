@@ -133,12 +133,10 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
             ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="black", linestyles="--", lw=1,
                       label=bound_label if j == 0 else None)
     for (text, values), style in zip((references or {}).items(), (":", "-.", (0, (1, 3)), (0, (5, 2, 1, 2)))):
-        for j, lv in enumerate(levels):  # estimators that learn nothing (e.g. the limit on pixels), per level
-            value = values.get(float(lv), np.nan)
-            if np.isfinite(value):
-                ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="dimgray", linestyles=style, lw=1.2,
-                          label=text if j == 0 or not any(np.isfinite(values.get(float(v), np.nan))
-                                                          for v in levels[:j]) else None)
+        shown = [(j, values[float(lv)]) for j, lv in enumerate(levels) if np.isfinite(values.get(float(lv), np.nan))]
+        for i, (j, value) in enumerate(shown):  # estimators that learn nothing (e.g. the limit on pixels), per level
+            ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="dimgray", linestyles=style, lw=1.2,
+                      label=text if i == 0 else None)
     _proxy(ax, f"whisker: {CI_TEXT}", marker="|", ms=8, color="black")
     ax.set_xticks(np.arange(len(levels)) + 0.4 - w / 2)
     ax.set_xticklabels([f"{level_name} {lv:g}" for lv in levels])

@@ -163,6 +163,49 @@ def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, 
     return out[["protocol", "model", "seed", *[c for c in out.columns if c not in ("protocol", "model", "seed")]]]
 
 
+
+def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 2000, 4000),
+                seed: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The limit on pixels (``drfkit.methods.pixel_bayes``) on the first ``n_sequences`` test sequences,
+    clean, at every max noise of ``levels`` and on the blackout set: the particle filter with the true
+    physics and the exact likelihood, the noise level marginalised ('pixel_pf') and known
+    ('pixel_pf_known_level'), the per-frame posterior mean ('per_frame_bayes') and per-frame template
+    matching ('template_matching'). Nothing is learned or tuned.
+
+    Returns (table, convergence): table rows per (noise, estimator): mae (``like_for_like_mae``: the
+    blackout set's over its blackout frames), n_sequences, n_particles; convergence rows per (noise,
+    n_particles): the marginalised filter's mae at each particle count."""
+    from drfkit.methods import pixel_bayes
+
+    sets = {"clean": studies.pendulum_split(P, "test", 0.0)}
+    sets |= {float(level): studies.pendulum_split(P, "test", level) for level in levels}
+    sets["blackout"] = blackout_split(P, "test")
+    most = max(particle_counts)
+    rows, conv = [], []
+    for name, arrays in steps(sets.items(), "the limit on pixels", len(sets)):
+        name = name if isinstance(name, str) else f"{name:g}"
+        images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
+        loglik = pixel_bayes.sequence_log_likelihoods(images)
+        known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
+        theta = oracle.template_angles(images)
+        by_count = {count: pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
+                    for count in particle_counts}
+        estimates = {
+            "pixel_pf": by_count[most],
+            "pixel_pf_known_level": pixel_bayes.pixel_particle_filter(known, n_particles=most, seed=seed),
+            "per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
+            "template_matching": np.stack([np.cos(theta), np.sin(theta)], axis=-1)}
+        for estimator, est in estimates.items():
+            rows.append({"noise": name, "estimator": estimator,
+                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name),
+                         "n_sequences": int(images.shape[0]),
+                         "n_particles": most if estimator.startswith("pixel_pf") else 0})
+        for count, est in by_count.items():
+            conv.append({"noise": name, "n_particles": count,
+                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
+    return pd.DataFrame(rows), pd.DataFrame(conv)
+
+
 # ------------------------------------------------------------------------------ pedestrians
 # Frames whose detection the pedestrian blackout removes (keypoints zeroed, confidence 0), in windows
 # whose every frame is real. No training window holds such an all-zero frame (a missed detection is
@@ -300,46 +343,3 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     raise SystemExit(main())
 
-
-PIXEL_LIMIT_SETS = ("clean", "blackout")
-
-
-def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 2000, 4000),
-                seed: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The limit on pixels (``drfkit.methods.pixel_bayes``) on the first ``n_sequences`` test sequences,
-    clean, at every max noise of ``levels`` and on the blackout set: the particle filter with the true
-    physics and the exact likelihood, the noise level marginalised ('pixel_pf') and known
-    ('pixel_pf_known_level'), the per-frame posterior mean ('per_frame_bayes') and per-frame template
-    matching ('template_matching'). Nothing is learned or tuned.
-
-    Returns (table, convergence): table rows per (noise, estimator): mae (``like_for_like_mae``: the
-    blackout set's over its blackout frames), n_sequences, n_particles; convergence rows per (noise,
-    n_particles): the marginalised filter's mae at each particle count."""
-    from drfkit.methods import pixel_bayes
-
-    sets = {"clean": studies.pendulum_split(P, "test", 0.0)}
-    sets |= {float(level): studies.pendulum_split(P, "test", level) for level in levels}
-    sets["blackout"] = blackout_split(P, "test")
-    most = max(particle_counts)
-    rows, conv = [], []
-    for name, arrays in steps(sets.items(), "the limit on pixels", len(sets)):
-        name = name if isinstance(name, str) else f"{name:g}"
-        images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
-        loglik = pixel_bayes.sequence_log_likelihoods(images)
-        known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
-        theta = oracle.template_angles(images)
-        estimates = {
-            "pixel_pf": pixel_bayes.pixel_particle_filter(loglik, n_particles=most, seed=seed),
-            "pixel_pf_known_level": pixel_bayes.pixel_particle_filter(known, n_particles=most, seed=seed),
-            "per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
-            "template_matching": np.stack([np.cos(theta), np.sin(theta)], axis=-1)}
-        for estimator, est in estimates.items():
-            rows.append({"noise": name, "estimator": estimator,
-                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name),
-                         "n_sequences": int(images.shape[0]),
-                         "n_particles": most if estimator.startswith("pixel_pf") else 0})
-        for count in particle_counts:
-            est = pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
-            conv.append({"noise": name, "n_particles": count,
-                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
-    return pd.DataFrame(rows), pd.DataFrame(conv)
