@@ -40,6 +40,24 @@ def test_the_true_image_is_the_most_likely_on_clean_and_noisy_frames():
             assert np.array_equal(ll.argmax(1), j)
 
 
+def test_likelihood_equals_the_sum_over_every_pixel_of_every_bank_image():
+    # the fast path sums only distinct (pixel, value) pairs of inked pixels; the definition sums all 576
+    bank = rod_bank()
+    rng = np.random.default_rng(3)
+    frames = blend_uniform_noise(bank.images[rng.integers(0, len(bank), 5)], np.array([0.0, 0.1, 0.4, 0.7, 1.0]), rng)
+    levels = np.array([0.0, 0.1, 0.4, 0.7, 1.0])
+    x = torch.from_numpy(frames.reshape(5, 1, -1).astype(np.int64))
+    c = torch.from_numpy(bank.images.reshape(1, len(bank), -1).astype(np.int64))
+    dense = pb.pixel_log_prob(x, c, torch.from_numpy(levels)[:, None, None]).sum(-1).numpy()
+    assert np.allclose(pb.frame_log_likelihoods(frames, levels), dense, rtol=0, atol=1e-6)
+    # marginalised: every grid level's dense likelihood, log-mean-exp'd, on the levels the pruning keeps
+    full = np.stack([pb.frame_log_likelihoods(frames, np.full(5, g)) for g in pb.LEVEL_GRID])  # (G, 5, J)
+    brute = torch.logsumexp(torch.from_numpy(full), 0).numpy() - math.log(len(pb.LEVEL_GRID))
+    # where the posterior has mass (the pruning drops levels only where an image is far less likely)
+    near = brute >= brute.max(1, keepdims=True) - 20.0
+    assert np.abs(pb.frame_log_likelihoods(frames) - brute)[near].max() < 0.01   # float32 tables
+
+
 def test_marginal_over_levels_keeps_the_posterior_of_the_whole_grid():
     d = generate_pendulum(1, 30, Noise("rkn_uniform", 0.9), 5)
     frames = d["images"][0]

@@ -24,6 +24,7 @@ rounding accident at a range's edge cannot veto the true image.
 from __future__ import annotations
 
 import math
+import warnings
 from functools import lru_cache
 
 import numpy as np
@@ -42,7 +43,8 @@ LEVEL_GRID = (0.0, *np.linspace(1.0 / 128, 1.0, 128))
 # levels above that bound / LEVEL_SPAN (+ a grid step) lose a factor (l_kept / l)^576 and are negligible
 # (tests/test_pixel_bayes.py compares with the whole grid).
 LEVEL_SPAN = 0.85
-FRAME_CHUNK = 256  # frames per gather: (chunk, J, K) int64 ~ 50 MB
+FRAME_CHUNK = 256  # frames per gather with the level known: (chunk, U) codes ~ 20 MB
+LEVEL_CHUNK = 32  # frames per gather over levels: up to ~25 levels each, (chunk * levels, U) codes ~ 70 MB
 
 
 def _sparse_bank():
@@ -73,63 +75,77 @@ def frame_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None) 
 
     ``levels`` (F,): each frame's true noise level; None: marginalised over ``LEVEL_GRID`` (uniform).
     Per frame, the sum over the 576 pixels is split into the sum as if every pixel were background
-    (c = 0, one value per frame) plus, over each image's K inked pixels, the change their value makes."""
+    (c = 0, one value per frame) plus, over each image's inked pixels, the change their value makes. The
+    bank's J images hold 21,553 inked pixels but only U ~ 10,000 distinct (pixel, value) pairs: each pair's
+    change is computed once per frame (f, U) and an incidence matrix (J, U) sums them per image."""
     images = np.asarray(images)
     if images.dtype != np.uint8 or images.ndim != 3 or images.shape[1:] != (pend.IMAGE_SIZE, pend.IMAGE_SIZE):
         raise ValueError(f"images must be uint8 (F, 24, 24), got {images.dtype} {images.shape}")
     x_all = torch.from_numpy(images.reshape(images.shape[0], -1).astype(np.int64))           # (F, 576)
-    pix, val = _sparse_bank()
+    upix, uval, incidence = _bank_pairs()
     if levels is not None:
         levels = np.asarray(levels, np.float64).reshape(-1)
         if levels.shape[0] != images.shape[0] or not np.all((levels >= 0) & (levels <= 1)):
             raise ValueError(f"levels must hold one level in [0, 1] per frame ({images.shape[0]}), got {levels.shape}")
-    out = np.empty((images.shape[0], pix.shape[0]))
+    out = np.empty((images.shape[0], incidence.shape[0]))
     if levels is not None:
+        inc = incidence.double()
         for start in range(0, images.shape[0], FRAME_CHUNK):
             x = x_all[start:start + FRAME_CHUNK]
-            xk, lv = x[:, pix], torch.from_numpy(levels[start:start + FRAME_CHUNK])
-            background = pixel_log_prob(x, torch.zeros(()), lv[:, None]).sum(1, keepdim=True)
-            change = pixel_log_prob(xk, val, lv[:, None, None]) - pixel_log_prob(xk, torch.zeros(()), lv[:, None, None])
-            out[start:start + x.shape[0]] = (background + change.sum(-1)).numpy()
+            lv = torch.from_numpy(levels[start:start + FRAME_CHUNK])[:, None]
+            background = pixel_log_prob(x, torch.zeros(()), lv).sum(1)                      # (f,)
+            xu = x[:, upix]                                                                 # (f, U)
+            change = pixel_log_prob(xu, uval, lv) - pixel_log_prob(xu, torch.zeros(()), lv)
+            out[start:start + x.shape[0]] = (background[:, None] + (inc @ change.T).T).numpy()
         return out
-    tables = _level_tables()                                                                # (G, 65536)
+    tables, changes = (t.view(-1) for t in _level_tables())                                 # G * 65536 each
     grid = torch.tensor(LEVEL_GRID, dtype=torch.float64)
     blank_pixels = torch.from_numpy(np.flatnonzero(~(rod_bank().images > 0).any(0).reshape(-1)))
-    for start in range(0, images.shape[0], FRAME_CHUNK):
-        x = x_all[start:start + FRAME_CHUNK]
-        xk = x[:, pix]                                                                      # (f, J, K)
+    for start in range(0, images.shape[0], LEVEL_CHUNK):
+        x = x_all[start:start + LEVEL_CHUNK]                                                # (f, 576)
         low = (x[:, blank_pixels].amax(1).double() - 0.5).clamp_min(0.0) / 255.0
-        first = torch.searchsorted(grid, low - 1e-12)                                       # (f,)
+        first = torch.searchsorted(grid, low - 1e-12).clamp_max(len(grid) - 1)             # (f,)
         last = torch.searchsorted(grid, (low / LEVEL_SPAN + 1.0 / 128).clamp_max(1.0)).clamp_max(len(grid) - 1)
-        codes = (x * 256, xk * 256 + val, xk * 256)
-        terms = []
-        for i in range(int((last - first).max()) + 1):
-            level = (first + i).clamp_max(len(grid) - 1)
-            term = _loglik_at(tables, level, *codes)
-            terms.append(torch.where((first + i <= last)[:, None], term, -math.inf))
-        out[start:start + x.shape[0]] = (torch.logsumexp(torch.stack(terms), 0) - math.log(len(grid))).numpy()
+        # every (frame, level) pair the pruning keeps, and no other: (q,) each
+        counts = last - first + 1
+        frame = torch.repeat_interleave(torch.arange(x.shape[0]), counts)
+        level = first[frame] + torch.arange(frame.numel()) - torch.repeat_interleave(counts.cumsum(0) - counts, counts)
+        codes = level[:, None] * 65536 + x[frame] * 256                                    # (q, 576): row l, k * 256
+        background = torch.take(tables, codes).sum(1)                                      # (q,)
+        change = torch.take(changes, codes[:, upix] + uval)                                # (q, U)
+        terms = background[:, None] + (incidence @ change.T).T                              # (q, J)
+        peak = torch.full((x.shape[0], terms.shape[1]), -math.inf).scatter_reduce(
+            0, frame[:, None].expand_as(terms), terms, "amax")                              # (f, J)
+        summed = torch.zeros_like(peak).index_add_(0, frame, (terms - peak[frame]).exp())
+        out[start:start + x.shape[0]] = (peak.double() + summed.double().log() - math.log(len(grid))).numpy()
     return out
 
 
 @lru_cache(maxsize=1)
-def _level_tables() -> torch.Tensor:
-    """log P(k | c, l) for every grid level: (G, 65536), entry k * 256 + c."""
+def _bank_pairs() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The bank's inked pixels as distinct (pixel, value) pairs: pixels (U,), values (U,) int64, and the
+    float32 incidence matrix (J, U) (sparse CSR) whose row j adds up image j's pairs."""
+    pix, val = _sparse_bank()
+    inked = val > 0
+    pairs, which = torch.unique(pix[inked] * 256 + val[inked], return_inverse=True)
+    rows = torch.arange(pix.shape[0])[:, None].expand_as(pix)[inked]
+    incidence = torch.sparse_coo_tensor(torch.stack([rows, which]), torch.ones(rows.numel()),
+                                        (pix.shape[0], pairs.numel()), check_invariants=True).coalesce()
+    with warnings.catch_warnings():  # "sparse CSR support is in beta": a matrix product is all it does here
+        warnings.simplefilter("ignore", UserWarning)
+        incidence = incidence.to_sparse_csr()
+    return pairs // 256, pairs % 256, incidence
+
+
+@lru_cache(maxsize=1)
+def _level_tables() -> tuple[torch.Tensor, torch.Tensor]:
+    """log P(k | c, l) for every grid level (G, 65536), entry k * 256 + c, and the change an inked c makes
+    to a background pixel's term, log P(k | c, l) - log P(k | 0, l), at the same entries."""
     codes = torch.arange(256)
-    return torch.stack([pixel_log_prob(codes[:, None], codes[None, :], torch.tensor(float(g))).flatten()
-                        for g in LEVEL_GRID]).float()  # float32: sums of 576 terms stay within 1e-3 of float64
-
-
-def _loglik_at(tables: torch.Tensor, level: torch.Tensor, bg_codes: torch.Tensor, inked_codes: torch.Tensor,
-               blank_codes: torch.Tensor) -> torch.Tensor:
-    """(f, J) log-likelihoods of f frames, frame i at grid level ``level[i]``: ``tables`` (G, 65536) =
-    log P(k | c) at k * 256 + c; the frames' codes k * 256 + c at every pixel as background (f, 576) and
-    at each image's inked pixels, inked (f, J, K) and as background (f, J, K)."""
-    rows = level[:, None]
-    background = tables[rows, bg_codes].sum(1, keepdim=True)                                # (f, 1)
-    shape = inked_codes.shape
-    inked = tables[rows, inked_codes.flatten(1)]                                            # padding: (0, 0) adds 0
-    blank = tables[rows, blank_codes.flatten(1)]
-    return background + (inked - blank).view(shape).sum(-1)
+    tables = torch.stack([pixel_log_prob(codes[:, None], codes[None, :], torch.tensor(float(g)))
+                          for g in LEVEL_GRID])                                              # (G, k, c) float64
+    # float32: sums of 576 terms stay within 1e-3 of float64
+    return tables.flatten(1).float(), (tables - tables[:, :, :1]).flatten(1).float()
 
 
 def per_frame_bayes(images: np.ndarray, levels: np.ndarray | None = None,
