@@ -188,7 +188,7 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
 
 
 # --------------------------------------------------------------------------- gated inference
-def layout_free_dropout(h, n_samples, p):
+def layout_free_dropout(h, n_samples, p, uniforms=None):
     """A dropout mask that depends only on a value and the sample index, not on where the
     frame sits in the batch, so gathered and full-batch passes draw the same masks."""
     s = torch.arange(1, n_samples + 1, dtype=h.dtype).view(-1, *([1] * h.ndim))

@@ -251,7 +251,7 @@ def test_monoloco_mc_dropout_switches_on_only_the_first_dropout():
     # residual blocks and the output layer in eval mode (no dropout)
     torch.manual_seed(5)
     first = torch.relu(model.input_norm(model.input_layer(h.reshape(6, 34))))
-    masks = torch.empty(S, 6, first.shape[-1]).bernoulli_(1 - p) / (1 - p)
+    masks = (torch.rand(S, 6, first.shape[-1]) >= p) / (1 - p)
     mus = []
     for m in masks:
         y = first * m
@@ -328,7 +328,7 @@ def test_decoder_batched_masks_equal_the_per_sample_definition():
     means, sigmas = dec(x, n_samples=5)
     torch.manual_seed(7)
     h = dec.hidden(x)
-    masks = torch.empty((5, *h.shape)).bernoulli_(0.7)
+    masks = (torch.rand((5, *h.shape)) >= 0.3).float()
     for s in range(5):
         m, sg = dec.readout(h * masks[s] / 0.7)
         assert torch.allclose(means[s], m, atol=1e-6) and torch.allclose(sigmas[s], sg, atol=1e-6)
@@ -515,3 +515,17 @@ def test_a_split_decoder_reads_the_mean_from_z_and_sigma_from_the_variance_alone
         Decoder(8, 2, split=8)
     with pytest.raises(ValueError, match="cannot be split"):
         build_model(default_config("lstm", "pendulum", 2, decoder_split=True))
+
+
+def test_fast_pooling_is_max_pool2d_bit_for_bit_and_training_keeps_max_pool2d():
+    from drfkit.models.parts import ImageEncoder, max_pool_2x2
+    x = torch.randn(7, 5, 24, 24)
+    x[:, :, :4, :4] = 0.25  # ties, as on a blank background
+    with torch.no_grad():
+        assert torch.equal(max_pool_2x2(x), torch.nn.functional.max_pool2d(x, 2))
+    enc = ImageEncoder(16, 6)
+    frames = torch.randint(0, 256, (2, 3, 24, 24), dtype=torch.uint8)
+    with torch.no_grad():
+        fast = enc(frames)
+    slow = enc(frames)  # autograd on: max_pool2d itself
+    assert slow.requires_grad and torch.equal(fast, slow.detach())

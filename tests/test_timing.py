@@ -190,7 +190,7 @@ class MaskBank:
         self.masks = (torch.rand(n_samples, *shape, generator=gen) > p).float() / (1 - p)
         self.used = 0
 
-    def __call__(self, h, n_samples, p):
+    def __call__(self, h, n_samples, p, uniforms=None):
         masks = self.masks[self.used:self.used + n_samples]
         self.used += n_samples
         return h.unsqueeze(0) * masks

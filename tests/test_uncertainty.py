@@ -10,7 +10,7 @@ import torch
 
 from drfkit.data.noise import Noise
 from drfkit.models import build_model, default_config
-from drfkit.methods.uncertainty import Prediction, intervals, predict, summarise_samples
+from drfkit.methods.uncertainty import Prediction, intervals, predict, predict_rates, summarise_samples
 
 torch.set_num_threads(1)
 
@@ -99,6 +99,21 @@ def test_summarise_samples_known_answer():
         summarise_samples(means, sigmas[:2])
 
 
+def test_rates_share_one_draw_and_each_equals_its_own_prediction():
+    """predict_rates draws the masks' uniforms once per chunk: each rate's prediction is the one
+    ``predict`` gives at that rate from the same seed, and the masks are nested across rates."""
+    model = make("drf", "keypoints")
+    x = numpy_inputs("keypoints", b=3, t=5)
+    torch.manual_seed(4)
+    both = predict_rates(model, x, n_samples=6, dropout_rates=[0.1, 0.4])
+    for pred, p in zip(both, (0.1, 0.4)):
+        torch.manual_seed(4)
+        alone = predict(model, x, n_samples=6, dropout_p=p)
+        for field in ("mean", "aleatoric", "epistemic", "total"):
+            assert torch.equal(getattr(pred, field), getattr(alone, field)), (p, field)
+    assert not torch.equal(both[0].epistemic, both[1].epistemic)
+
+
 def test_mc_equals_the_sequential_definition_for_the_same_masks():
     """predict's batched pass == S separate dropout passes drawing the same masks."""
     model = make("lstm", "keypoints")
@@ -109,7 +124,7 @@ def test_mc_equals_the_sequential_definition_for_the_same_masks():
     with torch.no_grad():
         h, _ = model.eval().features(torch.from_numpy(x))
         hidden = model.decoder.hidden(h)
-        masks = torch.empty((8, *hidden.shape)).bernoulli_(0.7) / 0.7
+        masks = (torch.rand((8, *hidden.shape)) >= 0.3) / 0.7
         outs = [model.decoder.readout(hidden * masks[s]) for s in range(8)]
     means = torch.stack([m for m, _ in outs])
     sigmas = torch.stack([s for _, s in outs])

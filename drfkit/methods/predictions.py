@@ -29,7 +29,9 @@ import torch
 from drfkit.util.io import CorruptArtefactError, atomic_torch_save, param_hash, torch_load_checked
 from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
 
-FORMAT = 1
+# 2: the masks are drawn as uniforms shared by the rates, per head chunk (uncertainty.predict_rates); a
+# prediction stored by format 1 holds other (equally valid) draws and is computed again
+FORMAT = 2
 FIELDS = ("mean", "aleatoric", "epistemic", "total")
 
 

@@ -177,8 +177,8 @@ class KnownDynamicsFilter(SequenceModel):
         tr = self.filter_steps(*self.observe(inputs), return_gains=return_gains)
         return self.belief(tr["x"], tr["p"]), tr.get("gains")
 
-    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
-             ) -> tuple[torch.Tensor, torch.Tensor]:
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None,
+             uniforms=None) -> tuple[torch.Tensor, torch.Tensor]:
         """mean = (cos, sin), sigma = sqrt(diag(H P H^T)) + SIGMA_FLOOR (..., 2); n_samples S > 0:
         (S, ..., 2), S identical copies (no dropout: the epistemic spread is 0)."""
         check_n_samples(n_samples)

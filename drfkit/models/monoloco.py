@@ -33,7 +33,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from drfkit.models.parts import (KEYPOINT_FEATURES, N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples,
-                                 keypoint_box_centre, keypoint_features)
+                                 keypoint_box_centre, keypoint_features, mc_dropout)
 from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding, frame_mask,
                                     masked_mean)
 
@@ -131,7 +131,7 @@ class Monoloco(SequenceModel):
         sigma = math.sqrt(2.0) * torch.exp(s) * mu.abs().clamp_min(MU_FLOOR)
         return mu.unsqueeze(-1), sigma.unsqueeze(-1)
 
-    def head(self, h, n_samples=0, dropout_p=None):
+    def head(self, h, n_samples=0, dropout_p=None, uniforms=None):
         """h (B, T, 34) (53 with inputs='detected') -> mean, sigma (B, T, 1), or (S, B, T, 1) for n_samples = S > 0."""
         check_n_samples(n_samples)
         if h.ndim != 3 or h.shape[-1] != INPUTS[self.inputs]:
@@ -148,7 +148,7 @@ class Monoloco(SequenceModel):
             mu, s = (v.unsqueeze(0).expand(n_samples, -1) for v in (mu, s))
         elif self.mc_mode == "batched":  # the input layer once, its dropout masks for all S at once
             first = self._first(x, bn_batch_stats=False)
-            folded = F.dropout(first.unsqueeze(0).expand(n_samples, -1, -1), p, training=True)
+            folded = mc_dropout(first, n_samples, p, uniforms)
             mu, s = (v.view(n_samples, b * t) for v in
                      self._rest(folded.reshape(n_samples * b * t, -1), p, dropout_on=False, bn_batch_stats=False))
         else:

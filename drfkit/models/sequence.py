@@ -51,7 +51,8 @@ import torch
 from torch import nn
 
 from drfkit.models.parts import (IMAGE_DOWNSAMPLES, LOG_R_RANGE, NOISE_HEADS, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, Decoder, ImageEncoder, KeypointEncoder,
-                                 ObservationHeads, check_dropout_p, check_n_samples, mean_and_log_variance)
+                                 ObservationHeads, SharedUniforms, check_dropout_p, check_n_samples,
+                                 mean_and_log_variance)
 
 INPUT_KINDS = ("pendulum", "keypoints")
 # how a belief [mean, log variance] becomes the output: the learned decoder (MC dropout), or read as it is
@@ -188,9 +189,9 @@ class SequenceModel(nn.Module):
                  ) -> tuple[torch.Tensor, torch.Tensor | None]:
         raise NotImplementedError
 
-    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
-             ) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p)
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None,
+             uniforms: SharedUniforms | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p, uniforms=uniforms)
 
     def forward(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h, _ = self.features(inputs)
@@ -290,13 +291,13 @@ class _EncodedSequenceModel(SequenceModel):
         self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale,
                                split=latent if decoder_split else None) if readout == "decoder" else None
 
-    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None
-             ) -> tuple[torch.Tensor, torch.Tensor]:
+    def head(self, h: torch.Tensor, n_samples: int = 0, dropout_p: float | None = None,
+             uniforms: SharedUniforms | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """The decoder's (mean, sigma); with ``readout='identity'`` the belief read as it is: mean =
         its first out_dim dims, sigma = the square root of their variances (+ SIGMA_FLOOR), no dropout
         (S identical samples: no epistemic spread)."""
         if self.readout == "decoder":
-            return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p)
+            return self.decoder(h, n_samples=n_samples, dropout_p=dropout_p, uniforms=uniforms)
         check_n_samples(n_samples)
         k = self.out_dim
         mean = h[..., :k]

@@ -1,0 +1,102 @@
+"""Where an MC-dropout evaluation spends its time, and what the two evaluation speed-ups save, in one run.
+
+    .venv/bin/python tools/bench_evaluation.py                 # the paper profile's test set, 1 thread
+    .venv/bin/python tools/bench_evaluation.py --sequences 8   # a smoke run (what the test does)
+
+Measured with ``torch.utils.benchmark`` on one torch thread, each pair in the same run:
+  pooling   the image encoder's 2x2 max pooling: ``F.max_pool2d`` against ``parts.max_pool_2x2`` (strided
+            maxima, the same values) on 256 frames, at the narrow (12) and wide (32) encoder's channels;
+  masks     the MC-dropout head at five rates on the frames of 8 sequences: a ``bernoulli_`` mask per rate
+            (the former draw) against one shared uniform draw (``parts.SharedUniforms``);
+  predict   ``uncertainty.predict_rates`` (25 samples, batch 256) of an untrained model of each pendulum kind
+            on ``--sequences`` test sequences at max noise 0.75, at the default rate and at the curves' five.
+Prints a table; nothing is written.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torch.utils import benchmark
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from drfkit.data.noise import Noise  # noqa: E402
+from drfkit.data.pendulum import generate_pendulum  # noqa: E402
+from drfkit.models import build_model, default_config  # noqa: E402
+from drfkit.models.parts import Decoder, SharedUniforms, max_pool_2x2  # noqa: E402
+from drfkit.methods.uncertainty import predict_rates, summarise_samples  # noqa: E402
+
+RATES = (0.05, 0.1, 0.2, 0.3, 0.5)
+
+
+def seconds(fn, min_run_time: float) -> float:
+    return benchmark.Timer("fn()", globals={"fn": fn}).blocked_autorange(min_run_time=min_run_time).median
+
+
+def pooling_rows(min_run_time: float) -> list[tuple[str, str, float]]:
+    rows = []
+    for channels in (12, 32):
+        for size in (24, 12):
+            x = torch.randn(256, channels, size, size)
+            assert torch.equal(F.max_pool2d(x, 2), max_pool_2x2(x))
+            rows.append((f"pool {channels}x{size}x{size}, 256 frames", "F.max_pool2d",
+                         seconds(lambda: F.max_pool2d(x, 2), min_run_time)))
+            rows.append((f"pool {channels}x{size}x{size}, 256 frames", "max_pool_2x2",
+                         seconds(lambda: max_pool_2x2(x), min_run_time)))
+    return rows
+
+
+def mask_rows(min_run_time: float) -> list[tuple[str, str, float]]:
+    dec = Decoder(8, 2, hidden=64, dropout_p=0.1).eval()
+    x = torch.randn(8, 75, 8)
+
+    def bernoulli():
+        h = dec.hidden(x)
+        for p in RATES:
+            mask = torch.empty((25, *h.shape)).bernoulli_(1 - p).div_(1 - p)
+            summarise_samples(*dec.readout(h.unsqueeze(0) * mask))
+
+    def shared():
+        uniforms = SharedUniforms()
+        for p in RATES:
+            summarise_samples(*dec(x, n_samples=25, dropout_p=p, uniforms=uniforms))
+
+    with torch.inference_mode():
+        return [("head, 5 rates, 600 frames", "bernoulli_ per rate", seconds(bernoulli, min_run_time)),
+                ("head, 5 rates, 600 frames", "shared uniforms", seconds(shared, min_run_time))]
+
+
+def predict_rows(n_sequences: int) -> list[tuple[str, str, float]]:
+    images = torch.from_numpy(generate_pendulum(n_sequences, 75, Noise("rkn_uniform", 0.75), 7)["images"])
+    rows = []
+    for kind in ("drf", "no_dynamics", "lstm", "known_dynamics"):
+        model = build_model(default_config(kind, "pendulum", 2))
+        for rates in ((None,), RATES):
+            start = time.perf_counter()
+            predict_rates(model, images, n_samples=25, dropout_rates=rates, batch_size=256)
+            rows.append((f"predict_rates {kind}, {n_sequences} sequences", f"{len(rates)} rate(s)",
+                         time.perf_counter() - start))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sequences", type=int, default=1000, help="test sequences for predict_rates")
+    parser.add_argument("--min-run-time", type=float, default=1.0, help="seconds per torch.utils.benchmark timer")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+    rows = pooling_rows(args.min_run_time) + mask_rows(args.min_run_time) + predict_rows(args.sequences)
+    print(f"{'what':46s} {'how':22s} {'ms':>10s}")
+    for what, how, s in rows:
+        print(f"{what:46s} {how:22s} {s * 1e3:10.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
