@@ -14,6 +14,7 @@ sys.path.insert(0, str(REPO_ROOT / "tools"))
 import booklib  # noqa: E402
 
 
+@pytest.mark.slow
 def test_booklib_imports_no_sphinx_or_browser():
     """make test runs without requirements-book.txt: the book's pure parts must not need it."""
     code = ("import sys; sys.path.insert(0, 'tools'); import booklib; "

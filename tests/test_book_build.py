@@ -23,6 +23,10 @@ from drfkit.util.paths import REPO_ROOT
 sys.path.insert(0, str(REPO_ROOT / "tools"))
 import booklib  # noqa: E402
 
+# subprocesses, papermill, Dask or a book build: left out of the edit loop `pytest -m "not slow"`
+pytestmark = pytest.mark.slow
+
+
 BOOK_TOOLS = ("sphinx", "myst_nb", "sphinx_book_theme")
 # a 1x1 PNG: what a notebook's figure output and a results figure hold here
 PNG = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8DwHwAFBQIAX8jx0gAAAABJRU5ErkJggg==")

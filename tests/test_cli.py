@@ -37,6 +37,7 @@ def test_every_command_the_docs_name_exists():
     assert not [p.name for p in texts if re.search(r"-m drfkit\.\w", p.read_text(encoding="utf-8"))]
 
 
+@pytest.mark.slow
 def test_python_dash_m_drfkit_runs():
     proc = subprocess.run([sys.executable, "-m", "drfkit", "--help"], capture_output=True, text=True, cwd=REPO_ROOT,
                           timeout=120)

@@ -24,6 +24,10 @@ from drfkit.study.params import ParameterError, load_profile, write_profile
 slow = pytest.mark.skipif(bool(os.environ.get("DRF_SKIP_SLOW")), reason="DRF_SKIP_SLOW is set: Dask cluster tests")
 
 # the quick profile, shrunk: one study, one protocol, 3 models x 2 seeds of 2 epochs on 4 sequences
+# subprocesses, papermill, Dask or a book build: left out of the edit loop `pytest -m "not slow"`
+pytestmark = pytest.mark.slow
+
+
 TINY = {"profile": "tiny", "pend_train_sequences": 4, "pend_val_sequences": 2, "pend_test_sequences": 2,
         "pend_seq_len": 6, "pend_epochs": 2, "pend_batch_size": 2, "seeds": [0, 1], "pend_protocols": ["paper"]}
 RUNS = 6

@@ -9,10 +9,15 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 
 from drfkit.book import pipeline
 from drfkit.study.params import load_profile, write_profile
 from drfkit.util.paths import REPO_ROOT
+
+
+# subprocesses, papermill, Dask or a book build: left out of the edit loop `pytest -m "not slow"`
+pytestmark = pytest.mark.slow
 
 
 def _tree(pid: int) -> list[int]:

@@ -40,6 +40,7 @@ def test_start_notebook_validates_and_records(results):
     assert entry["params"]["seeds"] == quick["seeds"]
 
 
+@pytest.mark.slow
 def test_cell_times_name_cells_by_code_and_replace_a_notebooks_rows(tmp_path, monkeypatch):
     import nbformat
     import pandas as pd
@@ -67,6 +68,7 @@ def test_cell_times_name_cells_by_code_and_replace_a_notebooks_rows(tmp_path, mo
     assert set(pd.read_csv(tmp_path / "p" / "cell_times.csv")["notebook"]) == {"01_a", "02_b"}
 
 
+@pytest.mark.slow
 def test_a_run_s_outputs_do_not_make_a_clean_tree_dirty_but_code_does(tmp_path, monkeypatch):
     """manifest.json's git.dirty: results/ (and $DRF_RESULTS inside the repository) are the run's
     own outputs; a changed or new file anywhere else is a change to the code."""
@@ -106,6 +108,7 @@ def test_a_run_s_outputs_do_not_make_a_clean_tree_dirty_but_code_does(tmp_path, 
     assert git_commit(repo)["dirty"] is True
 
 
+@pytest.mark.slow
 def test_cell_times_describe_the_last_run_only(tmp_path, monkeypatch):
     """Rows of a notebook that is not in the run (one since renamed) are dropped, by the pipeline's
     record and by `python -m drfkit manifest --cell-times`, which rebuilds the file."""

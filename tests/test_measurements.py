@@ -153,6 +153,7 @@ def test_the_notebook_manifest_lists_what_was_reused():
     assert measurements.reused() == []  # the next notebook starts with an empty list
 
 
+@pytest.mark.slow
 def test_make_passes_remeasure_to_the_pipeline():
     def dry(*extra):
         return subprocess.run(["make", "-n", "reproduce", *extra], cwd=REPO_ROOT, capture_output=True,

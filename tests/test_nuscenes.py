@@ -604,6 +604,7 @@ def _changed_fraction(root: Path, out: Path, facts: dict):
     return changed / total, white, black
 
 
+@pytest.mark.slow
 def test_noisify_cli_writes_salt_and_pepper_images(fixture, tmp_path):
     root, _, facts = fixture
     out = tmp_path / "noisy"

@@ -115,6 +115,7 @@ def test_bad_detector_config_is_rejected():
         validate("03_nuscenes_training", values)
 
 
+@pytest.mark.slow
 def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
     bad = yaml.safe_load((PARAMS_DIR / "quick.yaml").read_text())
     bad["pendulum"]["epohcs"] = 3
@@ -127,6 +128,7 @@ def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
     assert "== 00_data_prep" not in proc.stdout
 
 
+@pytest.mark.slow
 def test_yaml_with_wrong_type_names_notebook_and_key(tmp_path):
     path = write_profile(tmp_path / "bad.yaml", load_profile("quick") | {"pend_epochs": "many"})
     proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path)],
@@ -185,6 +187,7 @@ def test_missing_profile_lists_known_ones():
         load_profile("no_such_profile")
 
 
+@pytest.mark.slow
 def test_notebook_stops_in_its_first_cell_on_an_unknown_parameter(tmp_path):
     """The real thing: papermill injects an unknown key; the validation cell raises."""
     import papermill as pm

@@ -10,6 +10,7 @@ from drfkit.study.params import load_profile, write_profile
 from drfkit.util.paths import REPO_ROOT
 
 
+@pytest.mark.slow
 def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     # valid parameters, but device 'cuda' where torch sees no GPU fails in the notebook's first cell;
     # CUDA_VISIBLE_DEVICES="" hides a GPU from the run, so the test runs on a CUDA machine too
@@ -44,6 +45,7 @@ def test_overrides_are_parsed_as_yaml_and_checked():
             parse_overrides([bad])
 
 
+@pytest.mark.slow
 def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
     proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", "quick", "--only",
@@ -53,6 +55,7 @@ def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
     assert not (tmp_path / "results" / "quick" / "executed").exists()
 
 
+@pytest.mark.slow
 def test_the_pipeline_s_kernels_run_over_ipc_and_print_no_tcp_warning(tmp_path, capfd):
     """drfkit.book.pipeline.ipc_kernels: the kernel papermill starts listens on Unix sockets in a
     private folder, not on TCP ports, so ipykernel has no 'running over TCP without encryption'

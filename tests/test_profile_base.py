@@ -50,6 +50,7 @@ def test_a_circle_through_two_files_is_refused(tmp_path):
         load_profile(tmp_path / "a.yaml")
 
 
+@pytest.mark.slow
 def test_an_overridden_value_meets_the_notebooks_checks(tmp_path):
     (tmp_path / "mine.yaml").write_text("base: quick\npendulum:\n  epochs: many\n")
     with pytest.raises(ParameterError, match="pend_epochs"):

@@ -13,9 +13,15 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from drfkit.book import pipeline
 from drfkit.util.io import LockedError, exclusive_lock
 from drfkit.study.params import load_profile, write_profile
+
+
+# subprocesses, papermill, Dask or a book build: left out of the edit loop `pytest -m "not slow"`
+pytestmark = pytest.mark.slow
 
 
 def _pipeline(profile, env, *extra):

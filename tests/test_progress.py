@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from drfkit.util import progress
 
 
@@ -28,6 +30,7 @@ def test_steps_report_counts_and_the_last_step(tmp_path, monkeypatch):
     assert path.read_text().count("\n") == 1 and "slow: 5/5" in path.read_text()
 
 
+@pytest.mark.slow
 def test_echo_copies_a_child_process_lines_and_cleans_up(tmp_path):
     stream, path = io.StringIO(), tmp_path / ".nb.progress.log"
     code = ("from drfkit.util.progress import steps\n"

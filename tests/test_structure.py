@@ -228,3 +228,22 @@ def test_the_registry_says_which_levels_and_models_a_claim_sees():
                            ped_eval_p=[0.01, 0.025, 0.05], ped_train_p=0.01, ped_models=["monoloco", "drf"]), "a test")
     assert STUDIES["pendulum"].shifted_levels(P) == [0.75] and STUDIES["pendulum"].baselines(P) == ["lstm"]
     assert STUDIES["pedestrians"].shifted_levels(P) == [0.025, 0.05] and STUDIES["pedestrians"].baselines(P) == ["monoloco"]
+
+
+PROCESS_WORDS = ("subprocess.", "papermill", "execute_notebook", "LocalCluster", "Popen")
+
+
+def test_every_test_that_starts_a_process_is_marked_slow():
+    # the edit loop (pytest -m "not slow", README) stays fast only if new process-starting tests are marked
+    unmarked = []
+    for path in sorted((REPO_ROOT / "tests").glob("test_*.py")):
+        src = path.read_text(encoding="utf-8")
+        module_slow = "pytestmark = pytest.mark.slow" in src
+        for node in ast.parse(src).body:
+            if isinstance(node, ast.FunctionDef) and node.name.startswith("test_"):
+                body = ast.get_source_segment(src, node)
+                marked = module_slow or any("slow" in ast.unparse(d) for d in node.decorator_list)
+                if not marked and node.name != "test_every_test_that_starts_a_process_is_marked_slow" \
+                        and any(word in body for word in PROCESS_WORDS):
+                    unmarked.append(f"{path.name}::{node.name}")
+    assert not unmarked, "add @pytest.mark.slow to: " + ", ".join(unmarked)

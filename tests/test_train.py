@@ -63,6 +63,7 @@ def test_other_seed_differs(tmp_path):
     assert a.history[0]["val_loss"] != b.history[0]["val_loss"]
 
 
+@pytest.mark.slow
 def test_sigkill_mid_training_then_resume_matches(tmp_path):
     epochs = 25  # long enough that the kill lands before the end
     train, val = tiny_data()
@@ -235,6 +236,7 @@ def test_load_latest_gives_the_last_epoch_weights(tmp_path, monkeypatch):
     assert not state_equal(last.state_dict(), best.state_dict())
 
 
+@pytest.mark.slow
 def test_a_second_process_on_a_training_checkpoint_is_refused_and_writes_nothing(tmp_path):
     """Two real processes on one checkpoint: the second is refused with the holder named, the
     first's temp files are never swept from under it, and the first finishes normally."""
