@@ -9,7 +9,9 @@ Measured with ``torch.utils.benchmark`` on one torch thread, each pair in the sa
   masks     the MC-dropout head at five rates on the frames of 8 sequences: a ``bernoulli_`` mask per rate
             (the former draw) against one shared uniform draw (``parts.SharedUniforms``);
   predict   ``uncertainty.predict_rates`` (25 samples, batch 256) of an untrained model of each pendulum kind
-            on ``--sequences`` test sequences at max noise 0.75, at the default rate and at the curves' five.
+            (the DRF also with the book protocol's wide encoder) on ``--sequences`` sequences at max noise
+            0.75, at the default rate and at the curves' five, as it was ("former": F.max_pool2d, a
+            ``bernoulli_`` mask per rate, the head on the whole chunk) and now, one after the other.
 Prints a table; nothing is written.
 """
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import torch
@@ -28,7 +31,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from drfkit.data.noise import Noise  # noqa: E402
 from drfkit.data.pendulum import generate_pendulum  # noqa: E402
 from drfkit.models import build_model, default_config  # noqa: E402
+from drfkit.models import parts  # noqa: E402
 from drfkit.models.parts import Decoder, SharedUniforms, max_pool_2x2  # noqa: E402
+from drfkit.methods import uncertainty  # noqa: E402
 from drfkit.methods.uncertainty import predict_rates, summarise_samples  # noqa: E402
 
 RATES = (0.05, 0.1, 0.2, 0.3, 0.5)
@@ -71,16 +76,40 @@ def mask_rows(min_run_time: float) -> list[tuple[str, str, float]]:
                 ("head, 5 rates, 600 frames", "shared uniforms", seconds(shared, min_run_time))]
 
 
+def former_mc_dropout(h, n_samples, p, uniforms=None):
+    """The mask draw before the speed-ups: ``bernoulli_`` per call, nothing shared."""
+    if p == 0.0:
+        return h.unsqueeze(0).expand(n_samples, *h.shape)
+    mask = torch.empty((n_samples, *h.shape), dtype=h.dtype).bernoulli_(1.0 - p)
+    return h.unsqueeze(0) * mask.div_(1.0 - p)
+
+
+@contextmanager
+def former_evaluation():
+    """predict_rates as it was: F.max_pool2d, a bernoulli_ mask per rate, the head on the whole chunk."""
+    saved = parts.max_pool_2x2, parts.mc_dropout, uncertainty.HEAD_CHUNK_FRAMES
+    parts.max_pool_2x2 = lambda x: F.max_pool2d(x, 2)
+    parts.mc_dropout, uncertainty.HEAD_CHUNK_FRAMES = former_mc_dropout, 10 ** 9
+    try:
+        yield
+    finally:
+        parts.max_pool_2x2, parts.mc_dropout, uncertainty.HEAD_CHUNK_FRAMES = saved
+
+
 def predict_rows(n_sequences: int) -> list[tuple[str, str, float]]:
     images = torch.from_numpy(generate_pendulum(n_sequences, 75, Noise("rkn_uniform", 0.75), 7)["images"])
+    models = {"drf": {}, "drf (wide encoder)": {"encoder_channels": 32, "feature_dim": 128},
+              "no_dynamics": {}, "lstm": {}, "known_dynamics": {}}
     rows = []
-    for kind in ("drf", "no_dynamics", "lstm", "known_dynamics"):
-        model = build_model(default_config(kind, "pendulum", 2))
+    for label, options in models.items():
+        model = build_model(default_config(label.split()[0], "pendulum", 2, **options))
         for rates in ((None,), RATES):
-            start = time.perf_counter()
-            predict_rates(model, images, n_samples=25, dropout_rates=rates, batch_size=256)
-            rows.append((f"predict_rates {kind}, {n_sequences} sequences", f"{len(rates)} rate(s)",
-                         time.perf_counter() - start))
+            for how, context in (("former", former_evaluation), ("now", nullcontext)):
+                with context():
+                    start = time.perf_counter()
+                    predict_rates(model, images, n_samples=25, dropout_rates=rates, batch_size=256)
+                    rows.append((f"predict_rates {label}, {n_sequences} seq, {len(rates)} rate(s)", how,
+                                 time.perf_counter() - start))
     return rows
 
 
@@ -92,9 +121,9 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     torch.manual_seed(0)
     rows = pooling_rows(args.min_run_time) + mask_rows(args.min_run_time) + predict_rows(args.sequences)
-    print(f"{'what':46s} {'how':22s} {'ms':>10s}")
+    print(f"{'what':52s} {'how':22s} {'ms':>10s}")
     for what, how, s in rows:
-        print(f"{what:46s} {how:22s} {s * 1e3:10.2f}")
+        print(f"{what:52s} {how:22s} {s * 1e3:10.2f}")
     return 0
 
 
