@@ -11,5 +11,5 @@ def test_evaluation_benchmark_runs_and_prints_every_row(capsys):
     assert bench.main(["--sequences", "2", "--min-run-time", "0.01"]) == 0
     out = capsys.readouterr().out
     for row in ("F.max_pool2d", "max_pool_2x2", "bernoulli_ per rate", "shared uniforms",
-                "predict_rates known_dynamics, 2 seq", "former", "now"):
+                "predict_rates known_dynamics, 2 seq", "former", "now", "batch 1024"):
         assert row in out

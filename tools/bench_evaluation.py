@@ -11,7 +11,8 @@ Measured with ``torch.utils.benchmark`` on one torch thread, each pair in the sa
   predict   ``uncertainty.predict_rates`` (25 samples, batch 256) of an untrained model of each pendulum kind
             (the DRF also with the book protocol's wide encoder) on ``--sequences`` sequences at max noise
             0.75, at the default rate and at the curves' five, as it was ("former": F.max_pool2d, a
-            ``bernoulli_`` mask per rate, the head on the whole chunk) and now, one after the other.
+            ``bernoulli_`` mask per rate, the head on the whole chunk) and now, one after the other; and the
+            DRF at batches of 64, 256 (the book's) and 1024 sequences per call.
 Prints a table; nothing is written.
 """
 from __future__ import annotations
@@ -110,6 +111,13 @@ def predict_rows(n_sequences: int) -> list[tuple[str, str, float]]:
                     predict_rates(model, images, n_samples=25, dropout_rates=rates, batch_size=256)
                     rows.append((f"predict_rates {label}, {n_sequences} seq, {len(rates)} rate(s)", how,
                                  time.perf_counter() - start))
+    # batching more sequences per call (as stacking seeds or noise levels would): the per-step work of the
+    # recursion is what a bigger batch amortises
+    model = build_model(default_config("drf", "pendulum", 2))
+    for batch in (64, 256, 1024):
+        start = time.perf_counter()
+        predict_rates(model, images, n_samples=25, dropout_rates=(None,), batch_size=batch)
+        rows.append((f"predict_rates drf, {n_sequences} seq, 1 rate(s)", f"batch {batch}", time.perf_counter() - start))
     return rows
 
 
