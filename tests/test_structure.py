@@ -247,3 +247,17 @@ def test_every_test_that_starts_a_process_is_marked_slow():
                         and any(word in body for word in PROCESS_WORDS):
                     unmarked.append(f"{path.name}::{node.name}")
     assert not unmarked, "add @pytest.mark.slow to: " + ", ".join(unmarked)
+
+
+def test_no_private_name_is_imported_from_another_package():
+    # a leading underscore says "this package's own": another package reaching for it ties the two
+    crossing = []
+    for path in PACKAGE.rglob("*.py"):
+        importer = module_name(path)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("drfkit."):
+                if node.module.split(".")[:2] == importer.split(".")[:2]:
+                    continue
+                crossing += [f"{importer} imports {node.module}.{a.name}" for a in node.names
+                             if a.name.startswith("_") and not a.name.startswith("__")]
+    assert not crossing, "\n".join(crossing)

@@ -329,12 +329,14 @@ class Gate:
         return apply_gating(self.scores(gains), self.threshold, mask)
 
 
-def _real_mask(data) -> torch.Tensor:
+def real_mask(data) -> torch.Tensor:
+    """(N, T) bool: the frames of a SequenceData that are real (all of them when it has no mask)."""
     n, t = data.targets.shape[:2]
     return torch.ones(n, t, dtype=torch.bool) if data.mask is None else data.mask.bool()
 
 
-def _eval_mode(model):
+def eval_mode(model) -> bool:
+    """Put ``model`` in eval mode; returns whether it was training (restore it with ``model.train(was)``)."""
     was = model.training
     model.eval()
     return was
@@ -357,7 +359,7 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
                          f"a model that does (the DRF, 'drf')")
     p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
     device = torch.device(device) if device is not None else next(model.parameters()).device
-    was = _eval_mode(model)
+    was = eval_mode(model)
     try:
         x = as_model_input(model, val.inputs).to(device)
         h, gains = model.features(x, return_gains=True)
@@ -369,7 +371,7 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
         mc_mean, _, _, mc_total = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p))
     finally:
         model.train(was)
-    real = _real_mask(val).to(device)
+    real = real_mask(val).to(device)
     y = val.targets.to(device)
     k = mean_gain(gains)
     abs_error = (det_mean - y).abs().mean(dim=-1)
@@ -393,5 +395,5 @@ __all__ = [
     "SETTINGS", "NEVER", "ALWAYS", "mean_gain", "competency_score", "choose_direction",
     "threshold_for_fraction", "apply_gating", "choose_threshold", "random_selection", "oracle_selection", "random_gating",
     "GatedPrediction", "gated_head", "uncertainty_stage", "select_frames", "assemble", "run_setting",
-    "Gate", "fit_gate",
+    "Gate", "fit_gate", "real_mask", "eval_mode",
 ]

@@ -44,7 +44,7 @@ import pandas as pd
 import torch
 
 from drfkit.study.registry import STUDIES as REGISTRY
-from drfkit.methods.timing.clock import _single_calls, _warm_timer, load_average
+from drfkit.methods.timing.clock import single_calls, warm_timer, load_average
 
 BASELINE = ("monoloco", "published")  # the denominator of ratio_to_monoloco_published
 
@@ -230,7 +230,7 @@ def inference_benchmark(n_samples: int = 25, batch_sizes=(1, 16, 256), threads=(
                         with torch.inference_mode():
                             carry = model.initial_carry(first)
                         fns[kind, mode] = make_frame_fn(model, mode, frame, carry, n_samples)
-                        timers[kind, mode], call_s[kind, mode] = _warm_timer(fns[kind, mode], n_threads,
+                        timers[kind, mode], call_s[kind, mode] = warm_timer(fns[kind, mode], n_threads,
                                                                              min_run_time, warmup=3)
                     # Interleaved rounds: every configuration of the group is measured in each
                     # round, so a change in machine load during the group hits all of them
@@ -241,7 +241,7 @@ def inference_benchmark(n_samples: int = 25, batch_sizes=(1, 16, 256), threads=(
                     times: dict[tuple[str, str], list[float]] = {key: [] for key in timers}
                     for _ in range(rounds):
                         for key, tm in timers.items():
-                            times[key] += (_single_calls(fns[key], n_threads, 1) if call_s[key] > budget
+                            times[key] += (single_calls(fns[key], n_threads, 1) if call_s[key] > budget
                                            else tm.blocked_autorange(min_run_time=budget).times)
                     load = load_average()
                     for (kind, mode), per_call in times.items():

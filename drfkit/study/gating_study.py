@@ -17,8 +17,8 @@ import torch
 
 from drfkit.study import registry
 from drfkit.core.metrics import prediction_metrics
-from drfkit.methods.gating import (ALWAYS, NEVER, RANDOM_SEED_OFFSET, SETTINGS, Gate, GatedPrediction, _eval_mode,
-                           _real_mask, apply_gating, assemble, competency_score, fit_gate, oracle_selection,
+from drfkit.methods.gating import (ALWAYS, NEVER, RANDOM_SEED_OFFSET, SETTINGS, Gate, GatedPrediction, eval_mode,
+                           real_mask, apply_gating, assemble, competency_score, fit_gate, oracle_selection,
                            run_setting, select_frames, uncertainty_stage)
 from drfkit.models.parts import check_dropout_p, check_n_samples
 from drfkit.util.progress import steps
@@ -98,14 +98,14 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
     device = torch.device(device) if device is not None else next(model.parameters()).device
     x = as_model_input(model, test.inputs).to(device)
-    real = _real_mask(test).to(device)
+    real = real_mask(test).to(device)
     y = test.targets.to(device)
     n_real = int(real.sum())
     common = dict(n_samples=n_samples, dropout_p=p)
     kg = dict(direction=gate.direction)
     rnd = dict(random_seed=seed + RANDOM_SEED_OFFSET)
 
-    was = _eval_mode(model)
+    was = eval_mode(model)
     try:
         h, gains = model.features(x, return_gains=True)
         # Metrics from two full passes (``assemble``): every setting's frames take the same
@@ -221,7 +221,7 @@ def evaluation_level(P, study: str) -> float:
 def selected_fraction(model, gate: Gate, data, device=None) -> float:
     """Fraction of the real frames of ``data`` (a SequenceData) that ``gate`` sends to MC dropout."""
     device = torch.device(device) if device is not None else next(model.parameters()).device
-    was = _eval_mode(model)
+    was = eval_mode(model)
     try:
         gains = model.kalman_gains(as_model_input(model, data.inputs).to(device))
     finally:
@@ -229,7 +229,7 @@ def selected_fraction(model, gate: Gate, data, device=None) -> float:
     if gains is None:
         raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs a model that "
                          f"declares competency_gain (the DRF, 'drf')")
-    real = _real_mask(data).to(device)
+    real = real_mask(data).to(device)
     return float(gate.select(gains, real).sum()) / int(real.sum())
 
 

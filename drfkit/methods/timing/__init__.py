@@ -14,12 +14,12 @@ works for all of them; inside drfkit, import from the defining module):
 The inference benchmark (the paper's Table "performance", per study of ``drfkit.study.registry``)
 is a study: ``drfkit.study.bench``, ``python -m drfkit bench --profile quick|paper|path.yaml``.
 """
-from drfkit.methods.timing.clock import _single_calls, _warm_timer, interleaved_times, load_average, torch_threads
+from drfkit.methods.timing.clock import single_calls, warm_timer, interleaved_times, load_average, torch_threads
 from drfkit.methods.timing.training import (count_flops, epoch_times, fit_fixed_and_per_item, recursion_scaling,
                                             training_step, training_step_times)
 
 __all__ = [
-    "torch_threads", "interleaved_times", "load_average",
+    "torch_threads", "interleaved_times", "load_average", "single_calls", "warm_timer",
     "training_step", "training_step_times", "epoch_times", "recursion_scaling", "fit_fixed_and_per_item",
     "count_flops",
 ]

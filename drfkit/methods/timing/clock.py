@@ -30,7 +30,7 @@ def torch_threads(threads: int):
         torch.set_num_threads(previous)
 
 
-def _single_calls(fn, threads: int, n_calls: int) -> list[float]:
+def single_calls(fn, threads: int, n_calls: int) -> list[float]:
     """Seconds of ``n_calls`` calls of fn at ``threads``, each timed alone with the
     benchmark's clock (which synchronises CUDA before reading the time)."""
     with torch_threads(threads):
@@ -42,8 +42,8 @@ def _single_calls(fn, threads: int, n_calls: int) -> list[float]:
         return times
 
 
-def _warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str = "",
-                sub_label: str = "") -> tuple[benchmark.Timer, float]:
+def warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str = "",
+               sub_label: str = "") -> tuple[benchmark.Timer, float]:
     """A ``benchmark.Timer`` of ``fn()`` at ``threads`` after warm-up, and the seconds of
     the last warm-up call.
 
@@ -53,11 +53,11 @@ def _warm_timer(fn, threads: int, min_run_time: float, warmup: int, label: str =
     """
     timer = benchmark.Timer(stmt="fn()", globals={"fn": fn}, label=label, sub_label=sub_label,
                             num_threads=threads)
-    seconds = _single_calls(fn, threads, 1)[0]
+    seconds = single_calls(fn, threads, 1)[0]
     for _ in range(warmup - 1):
         if seconds > 0.1 * min_run_time:
             break
-        seconds = _single_calls(fn, threads, 1)[0]
+        seconds = single_calls(fn, threads, 1)[0]
     return timer, seconds
 
 
