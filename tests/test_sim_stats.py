@@ -1,10 +1,10 @@
-"""The simulator's statistics (drfkit.study.sim_stats): known answers on small synthetic inputs."""
+"""The simulator's statistics (drfkit.data.sim_stats): known answers on small synthetic inputs."""
 import numpy as np
 import pytest
 
 from drfkit.data.noise import Noise
 from drfkit.data.sim_detector import DetectorConfig, simulate_records
-from drfkit.study.sim_stats import (
+from drfkit.data.sim_stats import (
     align_to_truth,
     body_span_m,
     dataset_size,

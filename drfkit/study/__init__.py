@@ -4,7 +4,7 @@ profile made from it (``profile``), loading and validating a profile (``params``
 study's data and runs (``pendulum_runs``, ``pedestrian_runs``), naming, training and loading them
 (``studies``), evaluation over seeds (``evaluate``), the dynamics study (``dynamics``), the
 protocol ablation (``ablation``), the noise-regime map (``regime``), gating on test data
-(``gating_study``), the inference benchmark (``bench``), the simulator's statistics
+(``gating_study``), the inference benchmark (``bench``), the simulator's statistics for a profile
 (``sim_stats``), the paper's numbers (``paper``) and the claims' verdicts (``claims``).
 Imports every layer below.
 

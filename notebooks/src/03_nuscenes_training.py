@@ -62,10 +62,11 @@ from drfkit.methods.train import load_checkpoint
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-from drfkit.study import sim_stats
+from drfkit.data import sim_stats
+from drfkit.study.sim_stats import simulate_profile
 
 if P.pedestrians.source == "simulated":
-    sim_truth, sim_records = sim_stats.simulate_profile(P)
+    sim_truth, sim_records = simulate_profile(P)
     for level, sim_rec in sim_records.items():
         ac = sim_stats.error_autocorrelation(sim_truth, sim_rec)
         print(f"p = {level:g}: {sim_stats.dataset_size(sim_truth, sim_rec)}; keypoint-error correlation between "
