@@ -150,8 +150,10 @@ def test_dynamics_lines_show_the_regime_map(tmp_path):
                                (1.0, "no_dynamics", 0.06), (1.0, "physics_bound", 0.015)]]
     regime_summary(pd.DataFrame(rows)).to_csv(tmp_path / "pendulum_regime_summary.csv", index=False)
     text = "\n".join(dynamics_lines(tmp_path))
-    assert "| 0.5 | 0.75 | 0.0400 | 0.0500 | 0.0800 | 0.0200 | 0.50 | 2.00 |" in text
-    assert "| 1 | 0.75 | 0.0300 | 0.0300 | 0.0600 | 0.0150 | 0.50 | 2.00 |" in text
+    # the model columns are the kinds the map holds, in the registry's order, under their display labels
+    assert "| trained at | test | DRF (ours) | No dynamics | LSTM | reference |" in text
+    assert "| 0.5 | 0.75 | 0.0400 | 0.0800 | 0.0500 | 0.0200 | 0.50 | 2.00 |" in text
+    assert "| 1 | 0.75 | 0.0300 | 0.0600 | 0.0300 | 0.0150 | 0.50 | 2.00 |" in text
 
 
 def test_readme_claims_table_has_one_row_per_claim_and_a_verdict_per_protocol(tmp_path):

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from drfkit.models import MODEL_CLASSES
 from drfkit.report.figures import label, paper_value
 from drfkit.util.io import atomic_savefig, atomic_write_csv
 from drfkit.util.paths import figures_dir, tables_dir
@@ -146,11 +147,15 @@ def dynamics_lines(tables: Path) -> list[str]:
                   "`python -m drfkit regime`): DRF against no_dynamics (< 1: the filter helps) and against the "
                   "true-physics reference (the particle filter on no_dynamics' outputs; below 1 the DRF does "
                   "better than it):", "",
-                  "| trained at | test | DRF | LSTM | no_dynamics | reference | DRF / no_dynamics | DRF / reference |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for r in rg.itertuples():
-            lines.append(f"| {r.train_noise:g} | {r.test} | {r.drf:.4f} | {r.lstm:.4f} | {r.no_dynamics:.4f} | "
-                         f"{r.physics_bound:.4f} | {r.drf_over_no_dynamics:.2f} | {r.drf_over_bound:.2f} |")
+                  ]
+        # every model kind the map holds a column for, in the registry's order, so a new kind needs no edit here
+        kinds = [k for k in MODEL_CLASSES if k in rg.columns]
+        lines += ["| trained at | test | " + " | ".join(label(k) for k in kinds)
+                  + " | reference | DRF / no_dynamics | DRF / reference |",
+                  "|---|---|" + "---|" * (len(kinds) + 3)]
+        for _, r in rg.iterrows():
+            lines.append(f"| {r['train_noise']:g} | {r['test']} | " + " | ".join(f"{r[k]:.4f}" for k in kinds)
+                         + f" | {r['physics_bound']:.4f} | {r['drf_over_no_dynamics']:.2f} | {r['drf_over_bound']:.2f} |")
         lines.append("")
     return lines
 
