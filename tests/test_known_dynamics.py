@@ -112,3 +112,42 @@ def test_quality_head_raises_every_r_together():
         head.linear2.bias.fill_(2.0)
         _, high = head(torch.zeros(1, 8))
     assert torch.all(high > low)
+
+
+def test_learned_transition_carries_its_jacobian_and_the_pull_drives_it_to_the_true_one():
+    from drfkit.models.known_dynamics import LearnedTransition
+
+    torch.manual_seed(0)
+    step = LearnedTransition(16).double()
+    torch.nn.init.normal_(step.outer.weight, std=0.3)   # away from its zero start, so the Jacobian is not I
+    theta = torch.linspace(-3.0, 3.0, 9, dtype=torch.float64)
+    omega = torch.linspace(-8.0, 8.0, 9, dtype=torch.float64)
+    _, _, F = step(theta, omega)
+    eps = 1e-6
+    for col, (dt, do) in enumerate(((eps, 0.0), (0.0, eps))):
+        a, b, _ = step(theta + dt, omega + do)
+        c, d, _ = step(theta - dt, omega - do)
+        assert torch.allclose(F[..., :, col], torch.stack([(a - c) / (2 * eps), (b - d) / (2 * eps)], -1), atol=1e-7)
+    # started at zero the learned transition is a random walk; the pull alone drives it toward the pendulum
+    model = build_model({"kind": "known_dynamics", "input_kind": "pendulum", "out_dim": 2, "transition": "learned",
+                         "pull": 100.0})
+    assert build_model(model.config).transition == "learned"                 # the config carries it
+    x, y = torch.randint(0, 255, (2, 4, 24, 24), dtype=torch.uint8), _truth(2, 4)
+    pulled = batch_loss(model, "beta_nll", 1.0, x, y)
+    model.pull = 0.0
+    free = batch_loss(model, "beta_nll", 1.0, x, y)
+    model.pull = 100.0
+    assert torch.isclose(pulled - free, model.regulariser())                  # the training loss carries the pull
+    start = float(model.regulariser().detach())
+    opt = torch.optim.Adam(model.learned.parameters(), lr=1e-2)
+    for _ in range(300):
+        opt.zero_grad()
+        loss = model.regulariser()
+        loss.backward()
+        opt.step()
+    assert float(model.regulariser().detach()) < 0.1 * start
+    # the true transition has none, and a pull without a learned transition is refused early
+    plain = build_model({"kind": "known_dynamics", "input_kind": "pendulum", "out_dim": 2})
+    assert plain.regulariser() == 0.0 and "transition" not in plain.config
+    with pytest.raises(ValueError, match="pull"):
+        build_model({"kind": "known_dynamics", "input_kind": "pendulum", "out_dim": 2, "pull": 1.0})

@@ -81,7 +81,9 @@ def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, p
       the transition is trained to predict rather than only to carry the posterior);
     * ``obs_weight`` > 0: that weight times the same objective of the observation alone
       (``observation_output``: w_t with r_t as its variance), so that r_t is fitted as the variance of
-      what frame t shows -- high on a bad frame, which is what lowers a filter's gain there.
+      what frame t shows -- high on a bad frame, which is what lowers a filter's gain there;
+    * the model's own ``regulariser()`` (0 for most; the known-dynamics filter's pull of a learned
+      transition toward the true one).
     """
     if prior_weight > 0:
         if not hasattr(model, "forward_with_prior"):
@@ -101,7 +103,7 @@ def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, p
                              f"{type(model).__name__} has no observation; set obs_weight = 0 for it")
         obs_mean, obs_sigma = model.observation_output(inputs)
         loss = loss + obs_weight * objective_loss(model, objective, beta, obs_mean, obs_sigma, targets, mask)
-    return loss
+    return loss + model.regulariser()
 
 
 def make_optimiser(model, cfg):

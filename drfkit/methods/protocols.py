@@ -114,6 +114,14 @@ ROUND3_VARIANTS = {
     "fit_physical_book_wide": {"kind": "drf", "model": _PHYSICAL_DRF | _WIDE, "train": _FIT_PRIOR_OBS},
     "fit_obs_quality_book_wide": {"kind": "drf", "model": _SPLIT_BOOK | {"noise_head": "quality"} | _WIDE,
                                   "train": _FIT_PRIOR_OBS},
+    # the paper's other lever, "driving the learned state transition network towards a known dynamics model":
+    # the known-dynamics filter's state and encoder with a learned transition (x' = x + g(x), started as a
+    # random walk; q learned, as a learned transition's error must go somewhere), free or pulled toward the
+    # true pendulum (``KnownDynamicsFilter.regulariser``)
+    "fit_known_dynamics_learned": {"kind": "known_dynamics", "model": {"transition": "learned", "learn_q": True},
+                                   "train": _FIT_OBS},
+    "fit_known_dynamics_pulled": {"kind": "known_dynamics",
+                                  "model": {"transition": "learned", "learn_q": True, "pull": 100.0}, "train": _FIT_OBS},
 }
 VARIANTS.update(ROUND3_VARIANTS)
 

@@ -16,6 +16,13 @@ It splits the distance between a learned filter and the limit on pixels into wha
     start:   theta_0 = atan2(w_0), P_0 = diag(r_0, init_velocity_var), omega_0 = 0
     output:  mean = (cos theta, sin theta), sigma = sqrt(diag(H P H^T)) + SIGMA_FLOOR
 
+The paper's other future-work lever, "driving the learned state transition network towards a known
+dynamics model", is ``transition='learned'``: the same filter with a learned transition in the same state,
+x' = x + g(x), g an MLP of (sin theta, cos theta, omega) started at zero (a random walk) with its Jacobian
+carried analytically, and ``pull`` > 0 adds pull x mean ||x' - f(x)||^2 (the angle and a frame's worth of
+velocity) over a grid of the states the pendulum visits to the training loss (``regulariser``): 0 leaves
+the transition free, a large pull drives it to the true one.
+
 The output is the filter's own belief, no learned decoder: the model has no dropout, so its
 Monte Carlo samples are identical and its epistemic spread is 0 (``head`` accepts the arguments the
 DRF family's head takes). ``observation_output`` (w_t, sqrt r_t) is what an observation loss fits
@@ -23,6 +30,7 @@ DRF family's head takes). ``observation_output`` (w_t, sqrt r_t) is what an obse
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import torch
@@ -36,6 +44,10 @@ from drfkit.models.sequence import SequenceModel, make_encoder
 RK4_SUBSTEPS = 2  # RK4: against the generator's 500 semi-implicit Euler steps < 1e-4 rad after a frame (as 5 steps; tested)
 LOG_R_RANGE = OUTPUT_LOG_R_RANGE  # r of (cos, sin) on a bounded log scale, in the output's units
 _PENDULUM_C = pend.GRAVITY * pend.LENGTH * pend.MASS / (pend.MASS * pend.LENGTH ** 2 / 3.0)
+TRANSITIONS = ("true", "learned")
+# from rest at any angle the pendulum's speed stays below sqrt(4 c); the pull's grid reaches 10 % beyond
+OMEGA_MAX = 1.1 * math.sqrt(4.0 * _PENDULUM_C)
+PULL_GRID = (32, 24)  # angles x velocities where the pull compares the learned transition with the true one
 
 
 def pendulum_step(theta: torch.Tensor, omega: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -67,6 +79,27 @@ def pendulum_step(theta: torch.Tensor, omega: torch.Tensor) -> tuple[torch.Tenso
     return theta, omega, torch.stack([t_th, t_om], dim=-2)
 
 
+class LearnedTransition(nn.Module):
+    """x' = x + g(x) of (theta, omega) (B,) each, g = Linear(tanh(Linear(sin theta, cos theta, omega /
+    OMEGA_MAX))), its output layer zero at the start (x' = x), with F = dx'/dx (B, 2, 2)."""
+
+    def __init__(self, hidden: int):
+        super().__init__()
+        self.inner, self.outer = nn.Linear(3, hidden), nn.Linear(hidden, 2)
+        nn.init.zeros_(self.outer.weight)
+        nn.init.zeros_(self.outer.bias)
+
+    def forward(self, theta: torch.Tensor, omega: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        s, c = torch.sin(theta), torch.cos(theta)
+        a = torch.tanh(self.inner(torch.stack([s, c, omega / OMEGA_MAX], -1)))                # (B, H)
+        g = self.outer(a)                                                                   # (B, 2)
+        zero = torch.zeros_like(theta)
+        d_phi = torch.stack([torch.stack([c, zero], -1), torch.stack([-s, zero], -1),
+                             torch.stack([zero, torch.full_like(theta, 1.0 / OMEGA_MAX)], -1)], -2)  # (B, 3, 2)
+        d_g = self.outer.weight @ ((1.0 - a.square()).unsqueeze(-1) * (self.inner.weight @ d_phi))  # (B, 2, 2)
+        return theta + g[:, 0], omega + g[:, 1], torch.eye(2, dtype=theta.dtype) + d_g
+
+
 class KnownDynamicsFilter(SequenceModel):
     """The DRF family's encoder with an EKF on the pendulum's true equations (module docstring)."""
 
@@ -77,7 +110,8 @@ class KnownDynamicsFilter(SequenceModel):
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, feature_dim: int = 64,
                  image_downsample: str = "pool", q_theta: float = 1e-6,
                  q_omega: float = pend.TRANSITION_NOISE_STD ** 2, init_velocity_var: float = 25.0,
-                 learn_q: bool = False, encoder_channels: int = 12):
+                 learn_q: bool = False, encoder_channels: int = 12, transition: str = "true",
+                 transition_hidden: int = 32, pull: float = 0.0):
         if input_kind != "pendulum" or out_dim != 2:
             raise ValueError("the known-dynamics filter knows the pendulum only: input_kind 'pendulum', out_dim 2 "
                              f"(got {input_kind!r}, {out_dim!r})")
@@ -90,10 +124,19 @@ class KnownDynamicsFilter(SequenceModel):
                 raise ValueError(f"{name} must be a variance > 0, got {value!r}")
         if not isinstance(learn_q, bool):
             raise ValueError(f"learn_q must be True or False, got {learn_q!r}")
+        if transition not in TRANSITIONS:
+            raise ValueError(f"transition must be one of {TRANSITIONS}, got {transition!r}")
+        if isinstance(transition_hidden, bool) or not isinstance(transition_hidden, int) or transition_hidden < 1:
+            raise ValueError(f"transition_hidden must be a positive int, got {transition_hidden!r}")
+        if not (isinstance(pull, (int, float)) and pull >= 0) or (pull > 0 and transition != "learned"):
+            raise ValueError(f"pull must be >= 0 and only pulls a learned transition (transition='learned'), got "
+                             f"pull={pull!r} with transition={transition!r}")
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, feature_dim=feature_dim,
                               image_downsample=image_downsample, q_theta=float(q_theta), q_omega=float(q_omega),
                               init_velocity_var=float(init_velocity_var), learn_q=learn_q)
-                         | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {}))
+                         | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {})
+                         | ({"transition": transition, "transition_hidden": transition_hidden, "pull": float(pull)}
+                            if transition != "true" else {}))
         self.latent = 2  # what the diagnostics call the observed dims: (cos, sin)
         self.encoder = make_encoder(input_kind, feature_dim, image_downsample, encoder_channels)
         self.obs_mean = nn.Linear(feature_dim, 2)
@@ -101,6 +144,24 @@ class KnownDynamicsFilter(SequenceModel):
         log_q = torch.log(torch.tensor([q_theta, q_omega]))
         self.log_q = nn.Parameter(log_q) if learn_q else nn.Buffer(log_q)
         self.init_velocity_var = float(init_velocity_var)
+        self.transition, self.pull = transition, float(pull)
+        if transition == "learned":
+            self.learned = LearnedTransition(transition_hidden)
+            theta = torch.linspace(-math.pi, math.pi, PULL_GRID[0] + 1)[:-1]
+            omega = torch.linspace(-OMEGA_MAX, OMEGA_MAX, PULL_GRID[1])
+            grid_theta, grid_omega = (g.flatten() for g in torch.meshgrid(theta, omega, indexing="ij"))
+            self.pull_grid = nn.Buffer(torch.stack([grid_theta, grid_omega], -1), persistent=False)
+            self.pull_target = nn.Buffer(torch.stack(pendulum_step(grid_theta, grid_omega)[:2], -1), persistent=False)
+
+    def regulariser(self) -> torch.Tensor | float:
+        """pull x mean over the grid of (angle error of x')^2 + (FRAME_DT x velocity error)^2: how far the
+        learned transition is from the true one where the pendulum goes (0 for the true transition)."""
+        if self.transition != "learned" or self.pull == 0.0:
+            return 0.0
+        theta, omega, _ = self.learned(self.pull_grid[:, 0], self.pull_grid[:, 1])
+        d_theta = torch.remainder(theta - self.pull_target[:, 0] + math.pi, 2 * math.pi) - math.pi
+        d_omega = (omega - self.pull_target[:, 1]) * pend.FRAME_DT
+        return self.pull * (d_theta.square() + d_omega.square()).mean()
 
     # ---------------------------------------------------------------- observation
     def observe(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -125,7 +186,8 @@ class KnownDynamicsFilter(SequenceModel):
     def _step(self, x, P, w, r):
         """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F and the prior
         (x, P) before the update."""
-        theta, omega, F = pendulum_step(x[:, 0], x[:, 1])
+        step = pendulum_step if self.transition == "true" else self.learned
+        theta, omega, F = step(x[:, 0], x[:, 1])
         prior = torch.stack([theta, omega], -1)
         p_prior = F @ P @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior))
         s, c = torch.sin(theta), torch.cos(theta)
@@ -231,4 +293,4 @@ class KnownDynamicsFilter(SequenceModel):
         return self.belief(x, P).unsqueeze(1), (x, P)
 
 
-__all__ = ["KnownDynamicsFilter", "LOG_R_RANGE", "RK4_SUBSTEPS", "pendulum_step"]
+__all__ = ["KnownDynamicsFilter", "LearnedTransition", "LOG_R_RANGE", "RK4_SUBSTEPS", "TRANSITIONS", "pendulum_step"]

@@ -197,6 +197,10 @@ class SequenceModel(nn.Module):
         h, _ = self.features(inputs)
         return self.head(h)
 
+    def regulariser(self) -> torch.Tensor | float:
+        """A term the model adds to its training loss (``drfkit.methods.objectives.batch_loss``); none here."""
+        return 0.0
+
     def loss(self, mean: torch.Tensor, sigma: torch.Tensor, targets: torch.Tensor,
              mask: torch.Tensor | None = None) -> torch.Tensor:
         return gaussian_nll(mean, sigma, targets, mask)
