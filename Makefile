@@ -6,6 +6,9 @@ JOBS ?= 1
 # REMEASURE=1: measure timings and compute the cached studies again (drfkit.book.measurements)
 REMEASURE ?=
 REMEASURE_FLAG := $(if $(filter-out 0,$(REMEASURE)),--remeasure)
+# CELL_PROFILE=30: keep a cProfile of every cell slower than 30 s in results/$PROFILE/cell_profiles/
+CELL_PROFILE ?=
+CELL_PROFILE_FLAG := $(if $(CELL_PROFILE),--cell-profile $(CELL_PROFILE))
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -20,6 +23,7 @@ help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
 	@echo "               [JOBS=N]               train the missing runs first on N Dask workers"
 	@echo "               [REMEASURE=1]          measure timings again instead of reusing this machine's"
+	@echo "               [CELL_PROFILE=30]      keep a cProfile of every cell slower than 30 s (cell_profiles/)"
 	@echo "make quick                            the fast profile (< 10 min on 2 CPU cores)"
 	@echo "make test                             unit tests + strict nbval on notebooks/"
 	@echo "make bench                            the timing benchmark alone, prints the table"
@@ -36,7 +40,7 @@ $(STAMP): environment.txt pyproject.toml
 	@touch $@
 
 reproduce: $(STAMP)
-	$(PY) -m drfkit reproduce --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG)
+	$(PY) -m drfkit reproduce --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG) $(CELL_PROFILE_FLAG)
 
 # the pipeline directly, not a second make: a SIGTERM to this make then reaches it (it dies with its parent)
 quick: $(STAMP)

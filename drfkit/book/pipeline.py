@@ -305,7 +305,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--remeasure", action="store_true",
                         help="measure the timings and compute the cached deterministic studies again "
                              "(drfkit.book.measurements) instead of reusing them")
+    parser.add_argument("--cell-profile", type=float, metavar="SECONDS",
+                        help="run every cell under cProfile and keep the profile of each cell slower than SECONDS "
+                             "in results/<profile>/cell_profiles/ (drfkit.book.cell_profile)")
     args = parser.parse_args(argv)
+    if args.cell_profile is not None:
+        from drfkit.book.cell_profile import ENV as CELL_PROFILE_ENV
+
+        if not args.cell_profile >= 0:
+            parser.error("--cell-profile: seconds >= 0")
+        os.environ[CELL_PROFILE_ENV] = str(args.cell_profile)  # the notebooks' kernels inherit it
     if args.remeasure:
         from drfkit.book.measurements import REMEASURE_ENV
 

@@ -7,7 +7,9 @@ import os
 from typing import Any
 
 from drfkit.util.device import setup
+from drfkit.book.cell_profile import install, threshold_from_env
 from drfkit.book.manifest import NotebookTimer
+from drfkit.util.paths import results_dir
 from drfkit.study.params import notebook_globals, validate
 from drfkit.study.profile import Profile
 
@@ -24,6 +26,9 @@ def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Profile, N
     setup(params.threads, params.seeds[0], params.device)
     hold_profile(params.profile)
     timer = NotebookTimer(params.profile, notebook, params.as_dict())
+    threshold = threshold_from_env()
+    if threshold is not None:  # make reproduce CELL_PROFILE=seconds
+        install(notebook, results_dir(params.profile, "cell_profiles"), threshold)
     return params, timer
 
 
