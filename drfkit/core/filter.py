@@ -41,7 +41,8 @@ from __future__ import annotations
 import torch
 from torch.autograd.function import once_differentiable
 
-__all__ = ["kalman_predict", "kalman_update", "kalman_step", "ekf_update", "CHOLESKY_JITTER"]
+__all__ = ["kalman_predict", "kalman_update", "kalman_step", "kalman_step_unchecked", "ekf_update",
+           "CHOLESKY_JITTER"]
 
 # Multiplier of the jitter added to the diagonal of S when its Cholesky factorisation
 # fails (S numerically not positive definite, e.g. float32 with badly scaled P and R).
@@ -350,13 +351,26 @@ def fused_step_forward(z, P, F, q, w, r):
     """The forward of ``_FusedStep``: (z_new, P_new, K, saved), ``saved`` being what
     :func:`fused_step_backward` needs. Also the step of the DRF's whole-sequence recursion
     (``drfkit.models.recursion``), which keeps ``saved`` per step itself."""
+    z_pred, P_pred, S = _fused_prior(z, P, F, q, r)
+    z_new, P_new, K, (S_inv, I_minus_K, innovation) = _fused_posterior(z_pred, P_pred, _safe_cholesky(S), w, r)
+    return z_new, P_new, K, (z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
+
+
+def _fused_prior(z, P, F, q, r):
+    """z- = F z (B, n), P- = sym(F P F^T + Q) (B, n, n) and S = P- + R (B, n, n)."""
     z_pred = _bmv(F, z)
     P_pred = (F @ P) @ F.mT
     P_pred.diagonal(dim1=-2, dim2=-1).add_(q)
     P_pred = _symmetrise(P_pred)
     S = P_pred.clone()
     S.diagonal(dim1=-2, dim2=-1).add_(r)
-    S_inv = torch.cholesky_inverse(_safe_cholesky(S))
+    return z_pred, P_pred, S
+
+
+def _fused_posterior(z_pred, P_pred, L, w, r):
+    """The update from the prior and L, the lower Cholesky factor of S: z_new, P_new (Joseph form),
+    K, and (S^-1, I - K, w - z-) for the backward."""
+    S_inv = torch.cholesky_inverse(L)
     # K = P- S^-1 = (S - R) S^-1 = I - R S^-1: a row scaling of S^-1 instead of a matmul
     I_minus_K = S_inv * r.unsqueeze(-1)
     K = -I_minus_K
@@ -364,7 +378,28 @@ def fused_step_forward(z, P, F, q, w, r):
     innovation = w - z_pred
     z_new = z_pred + _bmv(K, innovation)
     P_new = torch.baddbmm((I_minus_K @ P_pred) @ I_minus_K.mT, K * r.unsqueeze(-2), K.mT)
-    return z_new, _symmetrise(P_new), K, (z, P, F, r, P_pred, S_inv, K, I_minus_K, innovation)
+    return z_new, _symmetrise(P_new), K, (S_inv, I_minus_K, innovation)
+
+
+def kalman_step_unchecked(z: torch.Tensor, P: torch.Tensor, F: torch.Tensor, q: torch.Tensor,
+                          w: torch.Tensor, r: torch.Tensor
+                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The fused step (z, q, w, r (B, n); P, F (B, n, n)) without a host synchronisation, for
+    inference loops that an accelerator runs as one captured graph (``drfkit.models.compiled``).
+
+    ``kalman_step`` asks the host whether every Cholesky factorisation succeeded (to add jitter
+    or raise a readable error): one device-to-host copy per step, which stalls a GPU and breaks a
+    captured graph. Here the factorisation's status is returned instead: ``failed`` (B,) bool,
+    True where S = P- + R was not positive definite (that item's outputs are then not to be
+    used). The caller checks it once per sequence and reruns a failed sequence with
+    ``kalman_step``, so the results and the errors are the same. Where no item fails, the values
+    are ``kalman_step``'s, bit for bit (the same operations in the same order). No autograd node:
+    inference only.
+    """
+    z_pred, P_pred, S = _fused_prior(z, P, F, q, r)
+    L, info = torch.linalg.cholesky_ex(S)
+    z_new, P_new, K, _ = _fused_posterior(z_pred, P_pred, L, w, r)
+    return z_new, P_new, K, info > 0
 
 
 def fused_step_backward(saved, g_z, g_P, g_K_out, symmetric: bool = False, out_F=None):

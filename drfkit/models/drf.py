@@ -9,6 +9,7 @@ import torch
 
 from drfkit.core.filter import kalman_step
 from drfkit.models.basis import BasisTransition
+from drfkit.models.compiled import filter_loop
 from drfkit.models.parts import mean_and_log_variance
 from drfkit.models import recursion
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
@@ -56,6 +57,8 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     #: train through the one-node recursion; False differentiates the per-step loop with autograd
     #: (same values, slower: kept for the tests and for timing the difference, not a config option)
     whole_sequence = True
+    #: inference with a captured filter step (``drfkit.models.compiled.accelerated`` sets it on CUDA)
+    compiled_step = None
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  transition_hidden: int = 64, transition_kind: str = "lstm", n_basis: int = 16,
@@ -112,7 +115,8 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         hand-written backward (``drfkit.models.recursion``); ``whole_sequence=False`` (default:
         the ``whole_sequence`` attribute) forces the per-step loop below, which autograd
         differentiates step by step (same values; the tests compare the two). Inference and
-        the basis transition always take the per-step loop.
+        the basis transition always take the per-step loop, at inference the captured step
+        when ``compiled_step`` is set (``drfkit.models.compiled``; same values).
         """
         check_observations(w, r, self.latent)
         whole_sequence = self.whole_sequence if whole_sequence is None else whole_sequence
@@ -120,6 +124,10 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                 w.requires_grad or r.requires_grad or any(p.requires_grad for p in self.transition.parameters())):
             z, p_diag = drf_recursion(self.transition, w, r)
             return z, p_diag, None
+        if self.compiled_step is not None and not torch.is_grad_enabled():
+            out = filter_loop(self.compiled_step, self.transition, w, r, return_gains)
+            if out is not None:  # else a factorisation failed: the checked loop jitters or raises
+                return out
         trace = self.filter_steps(w, r, return_gains=return_gains)
         return trace["z"], trace["p_diag"], trace.get("gains")
 
