@@ -14,6 +14,8 @@ import torch
 
 import drfkit.models.parts as parts
 from drfkit.methods import gating
+from drfkit.methods import gate_evaluation
+from drfkit.methods.timing import clock
 from drfkit.study import gating_study
 from drfkit.core.metrics import rank_correlation
 from drfkit.models import build_model, default_config
@@ -268,7 +270,7 @@ def test_evaluate_gate_and_sweep_rows_are_consistent():
     gate, val_table = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
     assert gate.direction in (1, -1) and len(gate.sweep_thresholds) == 4
     assert val_table["chosen"].sum() == 1
-    table, sweep = gating_study.sweep_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001)
+    table, sweep = gate_evaluation.sweep_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001)
     assert list(table["setting"]) == ["no_dropout", "always", "kalman_gain", "random"]
     by = table.set_index("setting")
     assert by.loc["no_dropout", "fraction"] == 0 and by.loc["always", "fraction"] == 1
@@ -307,24 +309,24 @@ def test_oracle_selection_takes_the_largest_errors_among_real_frames():
 
 def test_timing_subset_is_evenly_spaced_fixed_and_checked():
     lengths = torch.full((10,), 5)
-    assert gating_study.timing_subset(lengths, 0).tolist() == list(range(10))
-    assert gating_study.timing_subset(lengths, 50).tolist() == list(range(10))
-    idx = gating_study.timing_subset(torch.full((1000,), 75), 7500)  # the paper's pendulum: 100 sequences
+    assert clock.timing_subset(lengths, 0).tolist() == list(range(10))
+    assert clock.timing_subset(lengths, 50).tolist() == list(range(10))
+    idx = clock.timing_subset(torch.full((1000,), 75), 7500)  # the paper's pendulum: 100 sequences
     assert idx.numel() == 100 and idx[0] == 0 and idx[-1] == 999 and bool((idx.diff() > 0).all())
-    assert torch.equal(idx, gating_study.timing_subset(torch.full((1000,), 75), 7500))
-    assert gating_study.timing_subset(torch.tensor([1, 2, 3, 4]), 5).numel() == 2  # ceil(4 * 5 / 10)
+    assert torch.equal(idx, clock.timing_subset(torch.full((1000,), 75), 7500))
+    assert clock.timing_subset(torch.tensor([1, 2, 3, 4]), 5).numel() == 2  # ceil(4 * 5 / 10)
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="gating_timing_frames"):
-            gating_study.timing_subset(lengths, bad)
+            clock.timing_subset(lengths, bad)
 
 
 def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(monkeypatch):
     model, val, test = tiny_drf(), keypoint_data(seed=1), keypoint_data(seed=2)
     gate, _ = gating.fit_gate(model, val, n_samples=6, tolerance=0.0, n_points=4, seed=0)
-    thresholds = gating_study.sweep_thresholds(gate)
-    full = gating_study.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
-                                      thresholds=thresholds)
-    idx = gating_study.timing_subset(test.mask.sum(dim=1), 12)  # ceil(6 * 12 / 27) = 3: sequences 0, 2, 5
+    thresholds = gate_evaluation.sweep_thresholds(gate)
+    full = gate_evaluation.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                                         thresholds=thresholds)
+    idx = clock.timing_subset(test.mask.sum(dim=1), 12)  # ceil(6 * 12 / 27) = 3: sequences 0, 2, 5
     assert idx.tolist() == [0, 2, 5]
     subset_mask = test.mask[idx]
     feature_batches, stage_calls = [], []
@@ -340,9 +342,9 @@ def test_times_come_from_the_timed_subset_and_metrics_from_every_test_sequence(m
 
     monkeypatch.setattr(model, "features", features)
     monkeypatch.setattr(gating, "uncertainty_stage", stage_)  # run_setting's stage
-    monkeypatch.setattr(gating_study, "uncertainty_stage", stage_)  # evaluate_gate's
-    sub = gating_study.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
-                                     thresholds=thresholds, timing_frames=12)
+    monkeypatch.setattr(gate_evaluation, "uncertainty_stage", stage_)  # evaluate_gate's
+    sub = gate_evaluation.evaluate_gate(model, gate, test, n_samples=6, seed=0, min_run_time=0.001,
+                                        thresholds=thresholds, timing_frames=12)
     # metrics: one pass over all B sequences, identical to the untimed-subset run
     metrics = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae"]
     assert sub[metrics].equals(full[metrics])
@@ -374,7 +376,7 @@ def test_selected_fraction_of_never_and_always_gates():
     gate, _ = gating.fit_gate(model, data, n_samples=4, tolerance=0.0, n_points=3)
     for threshold, expected in ((gating.NEVER, 0.0), (gating.ALWAYS, 1.0)):
         g = gating.Gate(**{**gate.__dict__, "threshold": threshold})
-        assert gating_study.selected_fraction(model, g, data) == expected
+        assert gate_evaluation.selected_fraction(model, g, data) == expected
 
 
 def test_paper_table_has_picp_as_fraction():
@@ -387,6 +389,6 @@ def test_paper_table_has_picp_as_fraction():
 def test_measure_interleaved_reports_the_slower_function_as_slower():
     import time as _time
 
-    out = gating_study.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
-                                           min_run_time=0.01, min_rounds=3)
+    out = clock.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
+                                    min_run_time=0.01, min_rounds=3)
     assert out["slow"] > 0.0015 and out["fast"] < out["slow"]

@@ -17,7 +17,7 @@ between k_t and the absolute error of the deterministic prediction, on VALIDATIO
 
 Nothing here looks at test data before the gate is fixed: ``fit_gate`` takes only the
 validation set; ``choose_direction`` / ``choose_threshold`` take only validation arrays
-(their arguments say so); the test set enters only ``drfkit.study.gating_study``'s ``evaluate_gate`` /
+(their arguments say so); the test set enters only ``drfkit.methods.gate_evaluation``'s ``evaluate_gate`` /
 ``sweep_gate``, which apply a fitted ``Gate``. The threshold is the validation-score quantile of the
 smallest dropout fraction whose validation PICP is within ``tolerance`` of
 always-dropout's validation PICP. It is an absolute score value, so on noisier frames

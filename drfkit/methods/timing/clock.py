@@ -101,3 +101,29 @@ def load_average() -> float:
         return float(os.getloadavg()[0])
     except (AttributeError, OSError):
         return math.nan
+
+
+def timing_subset(frames_per_sequence: torch.Tensor, max_frames: int) -> torch.Tensor:
+    """Indices (k,) of the test sequences timed: k evenly spaced over all N, the same every
+    run, with k = ceil(N * max_frames / total frames) so that about ``max_frames`` real frames
+    are timed (0, or a set no larger than that: every sequence). Evenly spaced, not the first
+    k, so a test set ordered by scene or noise is sampled across its whole range.
+    frames_per_sequence: (N,) real frames of each sequence."""
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 0:
+        raise ValueError(f"gating_timing_frames must be an int >= 0 (0 = every test frame), got {max_frames!r}")
+    n, total = frames_per_sequence.numel(), int(frames_per_sequence.sum())
+    if max_frames == 0 or total <= max_frames:
+        return torch.arange(n)
+    k = math.ceil(n * max_frames / total)
+    return torch.linspace(0, n - 1, k, dtype=torch.float64).round().long()
+
+
+def measure_interleaved(fns: dict[str, Callable[[], Any]], min_run_time: float, block_s: float = 0.01,
+                        min_rounds: int = 5) -> dict[str, float]:
+    """Median seconds per call of each fn over interleaved rounds (``interleaved_times``:
+    blocks of about ``block_s`` seconds, the order rotated per round, at least ``min_rounds``
+    rounds and about ``min_run_time`` seconds per fn), so a slow spell of a shared machine hits
+    every setting alike."""
+    with torch.no_grad():
+        per_round = interleaved_times(fns, min_run_time, block_s=block_s, min_rounds=min_rounds)
+    return {n: float(np.median(v)) for n, v in per_round.items()}

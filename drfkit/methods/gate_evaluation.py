@@ -1,0 +1,198 @@
+"""A fitted gate applied to a TEST set: metrics of every setting and threshold from two passes, and
+the settings' times on the same inputs (``evaluate_gate``, ``sweep_gate``), and the fraction of frames
+a gate selects (``selected_fraction``).
+
+The gate itself, its fitting on validation data and gated inference are ``drfkit.methods.gating``'s;
+these functions take the test set as an explicit argument and never tune anything on it. The
+profile-driven study that calls them per seed is ``drfkit.study.gating_study``.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit.core.metrics import prediction_metrics
+from drfkit.methods.gating import (ALWAYS, NEVER, RANDOM_SEED_OFFSET, SETTINGS, Gate, GatedPrediction, apply_gating,
+                                   assemble, competency_score, eval_mode, oracle_selection, real_mask, run_setting,
+                                   select_frames, uncertainty_stage)
+from drfkit.methods.timing.clock import measure_interleaved, timing_subset
+from drfkit.methods.uncertainty import as_model_input
+from drfkit.models.parts import check_dropout_p, check_n_samples
+
+
+def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: float) -> dict[str, float]:
+    m = prediction_metrics(pred.mean, pred.total, y, real, level)
+    return {k: m[k] for k in ("picp", "mpiw", "nll", "mae")}
+
+
+@torch.no_grad()
+def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float | None = None,
+                  level: float = 0.95, seed: int = 0, min_run_time: float = 0.3, device=None,
+                  thresholds: dict[str, float] | None = None, timing_frames: int = 0) -> pd.DataFrame:
+    """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
+
+    Metrics: the features run once, then one deterministic and one always-dropout pass (masks
+    seeded by ``seed``); each gated setting's prediction is ``assemble``d from the two: its
+    selected frames take the always pass's result, the others the deterministic one. The head is
+    per frame, so this is gated inference's result with the always pass's masks on the selected
+    frames (the timed gated inference draws masks for those frames alone: other random numbers,
+    the same distribution), and every setting and threshold is judged on common random numbers.
+    Random gating selects as many frames as the Kalman-gain gate does on this test set (drawn
+    with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
+    adds Kalman-gain rows, each with its random twin 'random:<name>' and its oracle twin
+    'oracle:<name>' (``oracle_selection``: as many frames, those of largest true error of the
+    deterministic prediction; metrics only, its times are NaN) (used by ``sweep_gate``).
+
+    Times, per real frame, all measured in this call on the same inputs (interleaved medians),
+    on about ``timing_frames`` real frames of evenly spaced test sequences (``timing_subset``;
+    0: all of them); the metrics always use every test sequence. Per-frame times of a batch of
+    thousands of frames do not depend on its size, and timing ~46 settings x >= 5 rounds on
+    every frame of a big test set takes an hour on 2 cores. On the timed subset a random twin
+    draws as many frames as its Kalman-gain gate selects there (equal compute where timed):
+      features_ms  the features (encoder + filter; with gains for Kalman-gain rows only);
+      head_ms      the uncertainty stage alone (scoring, selection, gather, head, scatter);
+      time_ms      features_ms + head_ms: the inference of the setting. Settings differ only in
+                   the stage, and summing two medians keeps the features' timing noise out of
+                   the differences between settings;
+      whole_ms     the four settings' whole inference timed in one piece (``run_setting``), a
+                   check on time_ms (NaN for the extra thresholds).
+    Returns one row per setting: setting, threshold, fraction, n_selected, picp (fraction),
+    mpiw, nll, mae, time_ms, head_ms, features_ms, whole_ms, frames (real frames, metrics),
+    timed_frames (real frames of the timed subset), batch_ms (time_ms x timed_frames), threads.
+    """
+    n_samples = check_n_samples(n_samples)
+    p = model.default_dropout_p if dropout_p is None else check_dropout_p(dropout_p)
+    device = torch.device(device) if device is not None else next(model.parameters()).device
+    x = as_model_input(model, test.inputs).to(device)
+    real = real_mask(test).to(device)
+    y = test.targets.to(device)
+    n_real = int(real.sum())
+    common = dict(n_samples=n_samples, dropout_p=p)
+    kg = dict(direction=gate.direction)
+    rnd = dict(random_seed=seed + RANDOM_SEED_OFFSET)
+
+    was = eval_mode(model)
+    try:
+        h, gains = model.features(x, return_gains=True)
+        # Metrics from two full passes (``assemble``): every setting's frames take the same
+        # deterministic or always-dropout result, so settings differ only in which frames they select.
+        passes = {}
+        for setting in ("no_dropout", "always"):
+            torch.manual_seed(seed)
+            passes[setting] = uncertainty_stage(model, h, gains, real, setting, **common)
+        # name -> (setting, stage keyword arguments); random twins take the Kalman-gain count
+        variants: dict[str, tuple[str, dict[str, Any]]] = {
+            "no_dropout": ("no_dropout", {}), "always": ("always", {})}
+        rows = []
+
+        def evaluate(name, setting, extra):
+            pred = passes[setting] if setting in passes else assemble(
+                passes["no_dropout"], passes["always"],
+                select_frames(setting, gains, real, **extra, kind=model.config.get("kind")))
+            variants[name] = (setting, extra)
+            rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
+                                                                  else ALWAYS),
+                         "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level)})
+            return pred
+
+        evaluate("no_dropout", "no_dropout", {})
+        evaluate("always", "always", {})
+        twin_of: dict[str, str] = {}  # random twin -> its Kalman-gain row
+        # the oracle twins of the sweep: as many frames, those of largest true error (metrics only: never timed)
+        abs_error = (passes["no_dropout"].mean - y).abs().mean(dim=-1)
+        for name, thr in {"kalman_gain": gate.threshold, **(thresholds or {})}.items():
+            n_sel = int(evaluate(name, "kalman_gain", {**kg, "threshold": thr}).selected.sum())
+            twin = "random" if name == "kalman_gain" else f"random:{name}"
+            pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
+            assert int(pred.selected.sum()) == n_sel
+            rows[-1]["threshold"] = thr
+            twin_of[twin] = name
+            if name != "kalman_gain":
+                pred = assemble(passes["no_dropout"], passes["always"], oracle_selection(abs_error, real, n_sel))
+                rows.append({"setting": f"oracle:{name}", "threshold": thr, "n_selected": n_sel,
+                             **_metrics(pred, y, real, level)})
+
+        # ---- times, on the timed subset only
+        idx = timing_subset(real.sum(dim=1), timing_frames).to(device)
+        whole_set = idx.numel() == x.shape[0]
+        x_t, real_t = (x, real) if whole_set else (x[idx], real[idx])
+        h_t, gains_t = (h, gains) if whole_set else model.features(x_t, return_gains=True)
+        scores_t = competency_score(gains_t, gate.direction)
+        timed = {name: (setting, extra if setting != "random" else
+                        {**extra, "n_random": int(apply_gating(scores_t, variants[twin_of[name]][1]["threshold"],
+                                                               real_t).sum())})
+                 for name, (setting, extra) in variants.items()}
+        stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h_t, gains_t, real_t, s,
+                                                                         **common, **e))
+                     for name, (setting, extra) in timed.items()}
+        head_s = measure_interleaved(stage_fns, min_run_time / 2)
+        whole_fns = {name: (lambda s=timed[name][0], e=timed[name][1]:
+                            run_setting(model, x_t, real_t, s, **common, **e)) for name in SETTINGS}
+        whole_fns["features"] = lambda: model.features(x_t)
+        whole_fns["features_gains"] = lambda: model.features(x_t, return_gains=True)
+        whole_s = measure_interleaved(whole_fns, min_run_time, min_rounds=7)
+    finally:
+        model.train(was)
+    n_timed = int(real_t.sum())
+    frame = pd.DataFrame(rows)
+    frame["fraction"] = frame["n_selected"] / n_real
+    gains_used = frame["setting"].isin(["kalman_gain", *(thresholds or {})])
+    per_frame = 1e3 / n_timed
+    frame["head_ms"] = frame["setting"].map(head_s) * per_frame
+    frame["features_ms"] = np.where(gains_used, whole_s["features_gains"], whole_s["features"]) * per_frame
+    frame["time_ms"] = frame["features_ms"] + frame["head_ms"]
+    frame["whole_ms"] = frame["setting"].map(whole_s) * per_frame
+    frame["frames"] = n_real
+    frame["timed_frames"] = n_timed
+    frame["batch_ms"] = frame["time_ms"] * n_timed
+    frame["threads"] = torch.get_num_threads()
+    order = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae", "time_ms",
+             "head_ms", "features_ms", "whole_ms", "batch_ms", "frames", "timed_frames", "threads"]
+    return frame[order]
+
+
+def split_sweep(table: pd.DataFrame, gate: Gate) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Split ``evaluate_gate(..., thresholds=sweep_thresholds(gate))`` into the four settings and
+    the sweep rows (method in {kalman_gain, random, oracle}, val_fraction = the target fraction on validation)."""
+    is_sweep = table["setting"].str.contains(r"q\d+$")
+    sweep = table[is_sweep].copy()
+    sweep.insert(0, "method", np.select([sweep["setting"].str.startswith("random"), sweep["setting"].str.startswith("oracle")],
+                                        ["random", "oracle"], "kalman_gain"))
+    index = sweep["setting"].str.extract(r"q(\d+)$")[0].astype(int)
+    sweep.insert(1, "val_fraction", index.map(lambda i: gate.sweep_fractions[i]))
+    return (table[~is_sweep].reset_index(drop=True),
+            sweep.drop(columns="setting").reset_index(drop=True))
+
+
+def sweep_thresholds(gate: Gate) -> dict[str, float]:
+    """Names q0 ... q{m-1} -> the gate's validation-quantile thresholds (never ... always)."""
+    return {f"q{i}": thr for i, thr in enumerate(gate.sweep_thresholds)}
+
+
+def sweep_gate(model, gate: Gate, test, **kwargs) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The four settings and Kalman-gain / random gating at every threshold of
+    ``gate.sweep_thresholds`` (never ... always), on the TEST set, timed in one interleaved run.
+    Returns (settings table, sweep table); see ``evaluate_gate`` and ``split_sweep``."""
+    return split_sweep(evaluate_gate(model, gate, test, thresholds=sweep_thresholds(gate), **kwargs), gate)
+
+
+@torch.no_grad()
+def selected_fraction(model, gate: Gate, data, device=None) -> float:
+    """Fraction of the real frames of ``data`` (a SequenceData) that ``gate`` sends to MC dropout."""
+    device = torch.device(device) if device is not None else next(model.parameters()).device
+    was = eval_mode(model)
+    try:
+        gains = model.kalman_gains(as_model_input(model, data.inputs).to(device))
+    finally:
+        model.train(was)
+    if gains is None:
+        raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs a model that "
+                         f"declares competency_gain (the DRF, 'drf')")
+    real = real_mask(data).to(device)
+    return float(gate.select(gains, real).sum()) / int(real.sum())
+
+
+__all__ = ["evaluate_gate", "sweep_gate", "split_sweep", "sweep_thresholds", "selected_fraction"]
