@@ -221,7 +221,14 @@ def test_f2_is_labelled_by_the_protocols_training_frames(monkeypatch):
     from drfkit.study.claims.mechanism import UNKNOWN_TRAINING, pure_noise_training, training_label
 
     assert pure_noise_training("book") is None and pure_noise_training("paper") is None  # the third round's book
-    monkeypatch.setitem(protocols.PROTOCOLS, "book", protocols.PROTOCOLS["book"] | {"drf": "fit_prior_split_book"})
+    import dataclasses
+
+    from drfkit.models import DeepRecursiveFilter
+
+    spec = DeepRecursiveFilter.spec  # the DRF's book variant, as the second round's protocol trained it
+    monkeypatch.setattr(DeepRecursiveFilter, "spec", dataclasses.replace(
+        spec, protocols={**spec.protocols, "book": "fit_prior_split_book"}))
+    assert protocols.PROTOCOLS["book"]["drf"] == "fit_prior_split_book"
     assert "pure-noise blackouts in 50 % of its sequences" in pure_noise_training("book")
     # a table says what its models saw; one made before it did says it does not know
     table = pd.DataFrame({"model": ["drf", "lstm"], "pure_noise_training": [pure_noise_training("book")] * 2})

@@ -167,12 +167,13 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
         served.append((split, noise))
         return val if split == "val" else test
 
-    import dataclasses
+    from drfkit.study import registry, studies
 
-    from drfkit.study import registry
+    def fake_study_data(P, study, split, noise=None, protocol="paper"):
+        # what the studies layer serves: the entry's callable with the entry's Noise
+        return fake_data(P, split, registry.study(study).noise(noise, P), protocol)
 
-    # the study's data is its registry entry's callable
-    monkeypatch.setitem(registry.STUDIES, "pedestrians", dataclasses.replace(registry.STUDIES["pedestrians"], data=fake_data))
+    monkeypatch.setattr(studies, "study_data", fake_study_data)
     P = build_profile(dict(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
                            gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95), "a test")
     out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},

@@ -207,7 +207,7 @@ def test_detect_validates_inputs(truth):
         detect(truth, Noise("salt_and_pepper", 1.5), rng)
     with pytest.raises(TypeError, match="takes a Noise value"):
         detect(truth, 0.01, rng)  # a bare number: which kind?
-    with pytest.raises(ValueError, match="takes salt_and_pepper noise"):
+    with pytest.raises(ValueError, match="no corruption of pedestrian data for rkn_uniform.*PEDESTRIAN_CORRUPTIONS"):
         detect(truth, Noise("rkn_uniform", 0.01), rng)
     with pytest.raises(TypeError, match="Generator"):
         detect(truth, Noise("salt_and_pepper", 0.01), 0)

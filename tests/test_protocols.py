@@ -62,12 +62,17 @@ def test_paper_protocol_keeps_its_checkpoint_names_and_book_differs(tmp_path, mo
 def test_training_blackouts_touch_the_training_sequences_only(tmp_path, monkeypatch):
     # a protocol with training blackouts (the second round's) blacks out training frames, never the first
     # five, never validation; the book's protocol (the third round's) has none, so its data are the paper's
-    from drfkit.methods import protocols
+    import dataclasses
+
+    from drfkit.models import DeepRecursiveFilter
 
     P = quick(tmp_path, monkeypatch)
     paper_train = studies.pendulum_data(P, "train")
     assert torch.equal(paper_train.inputs, studies.pendulum_data(P, "train", protocol="book").inputs)
-    monkeypatch.setitem(protocols.PROTOCOLS, "book", protocols.PROTOCOLS["book"] | {"drf": "fit_prior_split_book"})
+    # the protocols are what the kinds' specs name: the DRF's spec, as the second round had it
+    spec = DeepRecursiveFilter.spec
+    monkeypatch.setattr(DeepRecursiveFilter, "spec", dataclasses.replace(
+        spec, protocols=spec.protocols | {"book": "fit_prior_split_book"}))
     book_train = studies.pendulum_data(P, "train", protocol="book")
     changed = (paper_train.inputs != book_train.inputs).flatten(2).any(-1)          # (N, T) frames that differ
     assert changed.any() and not changed[:, :5].any()

@@ -162,10 +162,15 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     seeded by the epoch alone; a protocol without a recipe keeps the model's loss and one draw."""
     import numpy as np
 
-    from drfkit.methods import protocols
+    import dataclasses
 
-    monkeypatch.setitem(protocols.PROTOCOLS, "book", {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout",
-                                                      "lstm": "fit_lstm_blackout", "known_dynamics": "fit_known_dynamics"})
+    from drfkit.models import MODEL_CLASSES
+
+    # the book's protocol of the second round: each kind's spec names the variant the protocol trains
+    for kind, variant in {"drf": "fit_prior_split_book", "no_dynamics": "fit_no_dynamics_blackout",
+                          "lstm": "fit_lstm_blackout", "known_dynamics": "fit_known_dynamics"}.items():
+        spec = MODEL_CLASSES[kind].spec
+        monkeypatch.setattr(MODEL_CLASSES[kind], "spec", dataclasses.replace(spec, protocols=spec.protocols | {"book": variant}))
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
     cfg = studies.train_config(P, "pendulum", "drf", 0, "book")
     assert (cfg.objective, cfg.beta, cfg.lr_schedule, cfg.window, cfg.select_on, cfg.prior_weight) == \

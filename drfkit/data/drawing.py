@@ -6,6 +6,7 @@ from typing import Mapping
 
 import numpy as np
 
+from drfkit.data.noise import Noise, pedestrian_corruption
 from drfkit.data.records import N_KEYPOINTS
 from drfkit.data.sim_world import COCO_SKELETON, CX, CY, FX, FY, IMAGE_HEIGHT, IMAGE_WIDTH
 
@@ -13,10 +14,11 @@ from drfkit.data.sim_world import COCO_SKELETON, CX, CY, FX, FY, IMAGE_HEIGHT, I
 def render_frame(
     truth_or_records: Mapping[str, np.ndarray],
     image_id: int,
-    p: float,
+    p: "float | Noise",
     seed: int = 0,
 ) -> np.ndarray:
-    """A synthetic RGB camera image of one keyframe with salt-and-pepper noise at p.
+    """A synthetic RGB camera image of one keyframe under noise ``p``: a ``Noise`` of a kind with a
+    pedestrian corruption (``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``), or a number, salt-and-pepper's p.
 
     Sky and road gradients with lane lines converging at the horizon, and each pedestrian
     of ``image_id`` as a filled stick figure (thickness scaled with its size, farthest
@@ -25,8 +27,6 @@ def render_frame(
     nothing is trained on these pixels.
     """
     import cv2
-
-    from drfkit.data.noise import salt_and_pepper
 
     ids = truth_or_records["image_id"]
     if not np.any(ids == image_id):
@@ -56,7 +56,9 @@ def render_frame(
             centre = pts[head].mean(axis=0).astype(int)
             cv2.circle(img, (int(centre[0]), int(centre[1])), max(2, int(round(0.11 * FY / max(float(z), 0.5)))),
                        colour, -1, cv2.LINE_AA)
-    return salt_and_pepper(img, float(p), np.random.default_rng(np.random.SeedSequence([seed, int(image_id), 3])))
+    noise = p if isinstance(p, Noise) else Noise("salt_and_pepper", p)
+    corrupt = pedestrian_corruption(noise, "render_frame").images
+    return corrupt(img, noise.level, np.random.default_rng(np.random.SeedSequence([seed, int(image_id), 3])))
 
 
 def _background() -> np.ndarray:

@@ -26,19 +26,29 @@ A noise setting is one value everywhere in the book: ``Noise("rkn_uniform", 0.5)
 max noise) or ``Noise("salt_and_pepper", 0.025)`` (the pedestrians' p). The data layer takes it
 and hashes ``noise.key()`` into its cache names, so two kinds at the same level never share a
 file; each study names its kind in ``drfkit.study.registry`` (``Study.noise(level)``).
+
+A new kind of noise
+-------------------
+A kind is its meaning (``NOISE_KINDS``) and what it does to a study's inputs: pendulum frames
+(``drfkit.data.pendulum.FRAME_CORRUPTIONS``) or pedestrian camera images and keypoints
+(``PEDESTRIAN_CORRUPTIONS`` below). All three are registries (``drfkit.util.registry``): one extension
+file registers a kind in them, and the data, caches and checkpoint names of a study that names it follow.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
+from drfkit.util.registry import Registry
+
 # kind -> what its level means
-NOISE_KINDS = {
+NOISE_KINDS: Registry = Registry("noise kind", {
     "rkn_uniform": "max noise of the RKN pendulum blend with uniform pixel noise (0 clean, 1 the benchmark)",
     "salt_and_pepper": "probability that a pixel is replaced by black or white",
-}
+})
 
 
 @dataclass(frozen=True)
@@ -170,6 +180,52 @@ def salt_and_pepper(
     out[white] = 255  # boolean mask over the pixel axes covers every channel of the pixel
     out[black] = 0
     return out
+
+
+def _same_level(level: float) -> float:
+    return level
+
+
+@dataclass(frozen=True)
+class PedestrianCorruption:
+    """What a noise kind does to the pedestrian study's inputs at level in [0, 1].
+
+    images     (pixels uint8 (..., H, W, C) colour, level, rng) -> corrupted uint8 of the same shape: the
+               camera images PifPaf reads (``drfkit.data.nuscenes.write_noisy_images``) and the simulated
+               frames drawn for show (``drfkit.data.drawing.render_frame``)
+    strain     level -> the simulated detector's strain, on salt-and-pepper p's scale: how hard the noise
+               hits the stand-in for PifPaf (``drfkit.data.sim_detector.detect``: its errors, misses and
+               confidence drops grow with it; 0 a clean image)
+    keypoints  None, or (keypoints float32 (M, 17, 3) pixel u, v, confidence; 0 = missed, level, rng) ->
+               the same array corrupted after detection (noise that hits the detector's output itself)
+    folder     the prefix of a level's PifPaf prediction folder ('p' -> 'p0.025'; '' -> '<kind>_')
+    """
+    images: Callable[[np.ndarray, float, np.random.Generator], np.ndarray]
+    strain: Callable[[float], float] = _same_level
+    keypoints: Callable[[np.ndarray, float, np.random.Generator], np.ndarray] | None = None
+    folder: str = ""
+
+
+def _salt_and_pepper_images(pixels: np.ndarray, p: float, rng: np.random.Generator) -> np.ndarray:
+    return salt_and_pepper(pixels, p, rng, channels_last=True)
+
+
+# noise kind -> how it corrupts the pedestrians' images and keypoints (a kind needs no entry for the pendulum)
+PEDESTRIAN_CORRUPTIONS: Registry = Registry("corruption of pedestrian data", {
+    "salt_and_pepper": PedestrianCorruption(_salt_and_pepper_images, folder="p"),
+})
+
+
+def pedestrian_corruption(noise, where: str) -> PedestrianCorruption:
+    """The corruption of ``noise`` (a ``Noise``) in ``PEDESTRIAN_CORRUPTIONS``, else a clear error naming
+    ``where`` and the registry."""
+    if not isinstance(noise, Noise):
+        raise TypeError(f"{where} takes a Noise value, e.g. Noise('salt_and_pepper', 0.025), got {noise!r}")
+    if noise.kind not in PEDESTRIAN_CORRUPTIONS:
+        raise ValueError(f"{where} has no corruption of pedestrian data for {noise}; kinds with one: "
+                         f"{sorted(PEDESTRIAN_CORRUPTIONS)} (register yours in "
+                         f"drfkit.data.noise.PEDESTRIAN_CORRUPTIONS)")
+    return PEDESTRIAN_CORRUPTIONS[noise.kind]
 
 
 def _check_positive_int(value, name: str) -> None:

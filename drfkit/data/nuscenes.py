@@ -72,7 +72,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from drfkit.data.noise import Noise, check_noise
+from drfkit.data.noise import Noise, pedestrian_corruption
 from drfkit.data.nuscenes_tables import ALL_CAMERAS, DEFAULT_CAMERAS, camera_images, project_annotations, read_tables
 from drfkit.data.pifpaf import (MIN_IOU, MONOLOCO_BOX_MARGIN, enlarge_boxes, expected_prediction_file,
                                 index_prediction_files, match_boxes, prediction_file_candidates, read_predictions)
@@ -82,8 +82,10 @@ from drfkit.util.io import atomic_write_bytes
 
 # --------------------------------------------------------------------------- records
 def noise_dir_name(noise: Noise) -> str:
-    """Folder name of one noise level's PifPaf predictions: 'p0.025' for salt-and-pepper 0.025."""
-    return f"p{check_noise(noise, 'salt_and_pepper', 'noise_dir_name').level:g}"
+    """Folder name of one noise level's PifPaf predictions: 'p0.025' for salt-and-pepper 0.025 (the prefix
+    is the kind's ``PedestrianCorruption.folder``, '<kind>_' when it names none)."""
+    prefix = pedestrian_corruption(noise, "noise_dir_name").folder or f"{noise.kind}_"
+    return f"{prefix}{noise.level:g}"
 
 
 def load_nuscenes_records(
@@ -95,7 +97,8 @@ def load_nuscenes_records(
     min_iou: float = MIN_IOU,
     box_margin: tuple[float, float] | None = MONOLOCO_BOX_MARGIN,
 ) -> dict[str, np.ndarray]:
-    """Pedestrian records (``drfkit.data.records``) from nuScenes + PifPaf at salt-and-pepper ``noise``.
+    """Pedestrian records (``drfkit.data.records``) from nuScenes + PifPaf at ``noise`` (a kind with a
+    pedestrian corruption: salt-and-pepper, or one registered in ``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``).
 
     Every keyframe image of ``cameras`` must have a prediction file in ``predictions_dir``
     (names: ``prediction_file_candidates``), and every one of them is read and checked (also
@@ -105,7 +108,8 @@ def load_nuscenes_records(
     sorted by (scene_id, track_id, timestamp); position/depth/distance come from the
     annotation, box (PifPaf's raw box) and keypoints from PifPaf.
     """
-    p = check_noise(noise, "salt_and_pepper", "the nuScenes reader").level
+    pedestrian_corruption(noise, "the nuScenes reader")
+    p = noise.level
     predictions_dir = Path(predictions_dir)
     if not predictions_dir.is_dir():
         raise FileNotFoundError(
@@ -182,7 +186,8 @@ def write_noisy_images(
     cameras: Iterable[str] = DEFAULT_CAMERAS,
     image_format: str = "png",
 ) -> list[Path]:
-    """Write copies of the keyframe images of ``cameras`` under salt-and-pepper ``noise``.
+    """Write copies of the keyframe images of ``cameras`` under ``noise`` (salt-and-pepper, or a kind
+    registered in ``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``).
 
     Each image ``<root>/<filename>`` goes to ``<out_dir>/<filename>`` with the suffix
     replaced by ``.png`` (image_format='png', lossless: the noise is exact) or kept
@@ -192,9 +197,7 @@ def write_noisy_images(
     """
     import cv2
 
-    from drfkit.data.noise import salt_and_pepper
-
-    p = check_noise(noise, "salt_and_pepper", "write_noisy_images").level
+    corrupt = pedestrian_corruption(noise, "write_noisy_images").images
     if image_format not in ("png", "jpg"):
         raise ValueError(f"image_format must be 'png' (lossless) or 'jpg', got {image_format!r}")
     tables = read_tables(root, version)
@@ -206,7 +209,7 @@ def write_noisy_images(
         if pixels is None:
             raise FileNotFoundError(f"camera image {src} is missing or unreadable; download the nuScenes 'samples' blobs")
         rng = np.random.default_rng([seed, zlib.crc32(image["filename"].encode())])
-        noisy = salt_and_pepper(pixels, p, rng, channels_last=True)
+        noisy = corrupt(pixels, noise.level, rng)
         rel = Path(image["filename"])
         dst = Path(out_dir) / (rel.with_suffix(".png") if image_format == "png" else rel)
         dst.parent.mkdir(parents=True, exist_ok=True)
@@ -226,14 +229,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     noisify = sub.add_parser("noisify", help="write salt-and-pepper copies of the keyframe camera images")
     noisify.add_argument("--root", required=True, help="nuScenes folder holding '<version>/' and 'samples/'")
     noisify.add_argument("--out", required=True, help="output folder (same relative paths)")
-    noisify.add_argument("--p", type=float, required=True, help="probability that a pixel is replaced")
+    noisify.add_argument("--p", type=float, required=True, help="the noise level (salt-and-pepper: probability "
+                         "that a pixel is replaced)")
+    noisify.add_argument("--kind", default="salt_and_pepper", help="the noise kind (drfkit.data.noise.NOISE_KINDS)")
     noisify.add_argument("--seed", type=int, default=0)
     noisify.add_argument("--version", default="v1.0-mini")
     noisify.add_argument("--cameras", nargs="+", default=list(DEFAULT_CAMERAS), choices=ALL_CAMERAS)
     noisify.add_argument("--format", default="png", choices=("png", "jpg"), dest="image_format")
     args = parser.parse_args(argv)
-    written = write_noisy_images(args.root, args.out, Noise("salt_and_pepper", args.p), args.seed, args.version, args.cameras, args.image_format)
-    print(f"wrote {len(written)} noisy images (p = {args.p:g}) under {args.out}")
+    written = write_noisy_images(args.root, args.out, Noise(args.kind, args.p), args.seed, args.version, args.cameras, args.image_format)
+    print(f"wrote {len(written)} noisy images ({Noise(args.kind, args.p)}) under {args.out}")
     return 0
 
 

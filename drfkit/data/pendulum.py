@@ -46,25 +46,20 @@ from __future__ import annotations
 
 import os
 import re
-from typing import Callable
 
 import numpy as np
 
 from drfkit.data.noise import Noise, blend_uniform_noise, rkn_noise_factors
 from drfkit.util.io import cached_npz
+from drfkit.util.registry import Registry
 
 # Seed conventions of the book's corrupted pendulum splits (every study draws them the same way).
 TRAINING_BLACKOUT_SEED_OFFSET = 7  # which training sequences get a blackout: data seed + this
 BLACKOUT_SEED_OFFSET = 11  # the blackout's pixel noise: split seed + this
 
-# Physics (the benchmark's values).
-MASS = 1.0
-LENGTH = 1.0
-GRAVITY = 9.81
-FRICTION = 0.1
-FRAME_DT = 0.05
-N_SUBSTEPS = 500  # 500 x 1e-4 s per frame
-TRANSITION_NOISE_STD = 0.1
+# Physics (the benchmark's values)
+from drfkit.data.pendulum_physics import (FRAME_DT, FRICTION, GRAVITY, LENGTH, MASS, N_SUBSTEPS,  # noqa: E402,F401
+                                          TRANSITION_NOISE_STD)
 
 # Rendering (the benchmark's values): the renderer lives in drfkit.data.rod_bank
 from drfkit.data.rod_bank import (CANVAS_PIVOT, CANVAS_SIZE, IMAGE_SIZE, ROD_LENGTH_PX, ROD_WIDTH_PX,  # noqa: E402
@@ -128,9 +123,10 @@ def _corrupt(clean: np.ndarray, max_noise: float, factor_rng, pixel_rng) -> tupl
 
 # noise kind -> how it corrupts a split's clean frames: (clean uint8 (N, T, 24, 24), level, factor_rng,
 # pixel_rng) -> (noisy uint8 (N, T, 24, 24), per-frame noise float32 (N, T)). A new noise kind is its
-# meaning in ``drfkit.data.noise.NOISE_KINDS`` and its corruption here; the generator, the fresh noise of
-# training and the caches (``Noise.key`` names them) follow.
-FRAME_CORRUPTIONS: dict[str, Callable[..., tuple[np.ndarray, np.ndarray]]] = {"rkn_uniform": _corrupt}
+# meaning in ``drfkit.data.noise.NOISE_KINDS`` and its corruption here, each added with ``.register``
+# (``drfkit.util.registry``); the generator, the fresh noise of training and the caches (``Noise.key``
+# names them) follow.
+FRAME_CORRUPTIONS: Registry = Registry("corruption of pendulum frames", {"rkn_uniform": _corrupt})
 
 
 def check_frame_noise(noise, where: str) -> Noise:

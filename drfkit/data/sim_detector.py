@@ -20,7 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from drfkit.data.noise import Noise, check_noise
+from drfkit.data.noise import Noise, pedestrian_corruption
 from drfkit.data.records import N_KEYPOINTS, check_records
 from drfkit.data.sim_world import IMAGE_HEIGHT, IMAGE_WIDTH, check_int
 
@@ -115,7 +115,9 @@ def detect(
     rng: np.random.Generator,
     config: DetectorConfig | None = None,
 ) -> dict[str, np.ndarray]:
-    """Simulated PifPaf on images with salt-and-pepper ``noise`` (probability p): truth -> records.
+    """Simulated PifPaf on images under ``noise``: truth -> records. p below is the noise's strain
+    (``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``: salt-and-pepper's probability p itself); a kind that
+    corrupts keypoints too has them corrupted after detection, by draws after the detector's own.
 
     **A stand-in for PifPaf on noisy images**, not an image model. For each true
     pedestrian-keyframe (rows of ``simulate_truth``), with r = ref_height_px / height_px:
@@ -134,10 +136,11 @@ def detect(
     grown by ``box_margin``. The random draws have shapes independent of p and p only scales
     them, so one generator state gives coupled observations across noise levels.
 
-    Returns records (``drfkit.data.records``) of the detected rows, noise = p.
+    Returns records (``drfkit.data.records``) of the detected rows, noise = the noise's level.
     """
     config = DetectorConfig() if config is None else DetectorConfig.from_dict(config)
-    p = check_noise(noise, "salt_and_pepper", "the simulated detector").level
+    corruption = pedestrian_corruption(noise, "the simulated detector")
+    p = float(corruption.strain(noise.level))
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy Generator (np.random.default_rng(seed)), got {type(rng).__name__}")
     for name in ("keypoints_px", "in_image", "height_px", "position", "intrinsics", "track_id"):
@@ -180,6 +183,8 @@ def detect(
     keep = (u_det >= p_det_miss) & (detected.sum(axis=1) >= c.min_keypoints)
 
     kp = keypoints[keep]
+    if corruption.keypoints is not None:  # after every draw above, so the detector's own draws stay coupled
+        kp = np.where(detected[keep][..., None], corruption.keypoints(kp.astype(np.float32), noise.level, rng), 0.0)
     det = detected[keep]
     u_min, u_max = np.where(det, kp[..., 0], np.inf).min(axis=1), np.where(det, kp[..., 0], -np.inf).max(axis=1)
     v_min, v_max = np.where(det, kp[..., 1], np.inf).min(axis=1), np.where(det, kp[..., 1], -np.inf).max(axis=1)
@@ -199,7 +204,7 @@ def detect(
         "scene_id": truth["scene_id"][keep].astype(np.int64),
         "timestamp": truth["timestamp"][keep].astype(np.int64),
         "image_id": truth["image_id"][keep].astype(np.int64),
-        "noise": np.full(int(keep.sum()), p, dtype=np.float32),
+        "noise": np.full(int(keep.sum()), noise.level, dtype=np.float32),
     }
     check_records(rec)
     return rec
@@ -211,7 +216,8 @@ def simulate_records(
     seed: int = 0,
     config: DetectorConfig | Mapping[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Observe the simulated people under salt-and-pepper ``noise`` (see ``detect``).
+    """Observe the simulated people under ``noise`` (salt-and-pepper, or a kind registered in
+    ``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``; see ``detect``).
 
     The detector's generator depends on ``seed`` only, so calls with the same truth and seed
     at different levels see the same people with coupled detector randomness.

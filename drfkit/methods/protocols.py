@@ -3,7 +3,8 @@
 A *variant* is a model kind, its options (``drfkit.models``) and a training-time corruption;
 ``drfkit.study.ablation`` trains each on a small budget and judges it on validation data. A
 *protocol* names one variant per model kind, so the three models of a comparison are trained
-the same way:
+the same way; each kind's class names its variants (``drfkit.models.spec.ModelSpec.protocols``),
+``PROTOCOLS`` gathers them:
 
 * ``paper`` -- the paper as written: LSTM transition network, ELU + 1 observation variance,
   every latent dim observed, training frames as the benchmark makes them.
@@ -20,7 +21,10 @@ Every variant stays listed, whether it helped or not: the ablation table shows t
 """
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from typing import TYPE_CHECKING, Any
+
+from drfkit.models.kinds import MODEL_CLASSES, model_spec
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -137,16 +141,36 @@ ABLATION_BUDGETS: dict[str, dict[str, Any]] = {
     "fit_tiny": dict(train_sequences=6, val_sequences=4, seq_len=48, epochs=2, lr=1e-3, batch_size=3),  # tests
 }
 
-PROTOCOLS: dict[str, dict[str, str]] = {
-    "paper": {"drf": "paper", "no_dynamics": "no_dynamics_paper", "lstm": "lstm_paper"},
-    # the third round's choice: of the DRF variants trained without pure-noise frames, the one that meets
-    # the most of the mechanism and blackout targets on validation (r follows the noise, gain on pure noise
-    # <= 0.25 of clean, F z predicts the next observation better than z, blackout MAE <= 0.10), with the
-    # wider encoder; every model on the same data and encoder (docs/dynamics.md). The second round chose
-    # "fit_prior_split_book" (trained with blackouts), the first "book".
-    "book": {"drf": "fit_physical_book_wide", "no_dynamics": "fit_no_dynamics_wide", "lstm": "fit_lstm_wide",
-             "known_dynamics": "fit_known_dynamics_wide"},
-}
+class _Protocols(Mapping):
+    """protocol -> {kind: variant}: what each protocol trains for each registered model kind, read from
+    the kinds' specs (``ModelSpec.protocols``) when asked, in registration order, so a model registered
+    in one file is trained under the protocols its spec names.
+
+    ``paper`` is the paper as written (``paper``, ``no_dynamics_paper``, ``lstm_paper``). ``book`` is the
+    third round's choice: of the DRF variants trained without pure-noise frames, the one that meets the
+    most of the mechanism and blackout targets on validation (r follows the noise, gain on pure noise
+    <= 0.25 of clean, F z predicts the next observation better than z, blackout MAE <= 0.10), with the
+    wider encoder; every model on the same data and encoder (docs/dynamics.md). The second round chose
+    "fit_prior_split_book" (trained with blackouts), the first "book"."""
+
+    def _table(self) -> dict[str, dict[str, str]]:
+        table: dict[str, dict[str, str]] = {}
+        for kind in MODEL_CLASSES:
+            for protocol, variant in model_spec(kind).protocols.items():
+                table.setdefault(protocol, {})[kind] = variant
+        return table
+
+    def __getitem__(self, protocol: str) -> dict[str, str]:
+        return self._table()[protocol]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._table())
+
+    def __len__(self) -> int:
+        return len(self._table())
+
+
+PROTOCOLS: Mapping[str, dict[str, str]] = _Protocols()
 
 
 # The pedestrian study's protocols: what each adds to the DRF family's schedule (the profile's
@@ -162,7 +186,8 @@ PEDESTRIAN_PROTOCOLS: dict[str, dict[str, Any]] = {
 
 
 # The noise-regime map (``drfkit.study.regime``): the book's protocol of each model kind, trained at
-# other max noise levels than the paper's 0.5. ``regime_variant`` names them.
+# other max noise levels than the paper's 0.5 (the book's own kinds: taken when this module is imported).
+# ``regime_variant`` names them.
 REGIME_BASES = dict(PROTOCOLS["book"])
 REGIME_TRAIN_NOISE = (0.75, 1.0)
 # the first round's book protocol, whose regime rows (book_train0.75, ...) stay readable

@@ -1,8 +1,12 @@
-"""Models of the study: DRF, its two baselines and Monoloco, behind one interface.
+"""Models of the study: DRF, its two baselines, Monoloco and the known-dynamics filter, behind one interface.
 
 See ``drfkit.models.sequence`` for the interface every model exposes (the DRF itself is
 ``drfkit.models.drf``), and ``build_model(config)`` to rebuild a model from the ``config`` a
 checkpoint stores.
+
+``MODEL_CLASSES`` (kind -> class) is the registry of model kinds; each class declares its
+``ModelSpec`` (``drfkit.models.spec``: label, colour, studies, bench modes, protocol variants), so
+a model added in one file (``drfkit.util.registry``) is listed wherever the book lists models.
 """
 from __future__ import annotations
 
@@ -15,10 +19,12 @@ from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_
 from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads
 from drfkit.models.recursion import TransitionNetwork
 from drfkit.models.sequence import INPUT_KINDS, LSTMBaseline, NoDynamics, SequenceModel, gaussian_nll
+from drfkit.models.kinds import MODEL_CLASSES, kinds_of, model_spec
+from drfkit.models.spec import ModelSpec
 
-MODEL_CLASSES: dict[str, type[SequenceModel]] = {
-    cls.kind: cls for cls in (DeepRecursiveFilter, NoDynamics, LSTMBaseline, Monoloco, KnownDynamicsFilter)
-}
+# the book's kinds, in the order every list of models shows them (tables, legends, study kinds)
+for _cls in (DeepRecursiveFilter, NoDynamics, LSTMBaseline, Monoloco, KnownDynamicsFilter):
+    MODEL_CLASSES.register(_cls.kind, _cls)
 
 
 def _accepted_keys(cls: type) -> set[str]:
@@ -59,7 +65,7 @@ def default_config(kind: str, input_kind: str, out_dim: int, **overrides: Any) -
 
 
 __all__ = [
-    "build_model", "default_config", "MODEL_CLASSES", "INPUT_KINDS", "SequenceModel",
+    "build_model", "default_config", "kinds_of", "model_spec", "ModelSpec", "MODEL_CLASSES", "INPUT_KINDS", "SequenceModel",
     "DeepRecursiveFilter", "KnownDynamicsFilter", "NoDynamics", "LSTMBaseline", "Monoloco",
     "ImageEncoder", "KeypointEncoder", "ObservationHeads", "TransitionNetwork", "Decoder",
     "gaussian_nll", "centre_keypoints", "relative_laplace_loss",

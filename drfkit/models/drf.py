@@ -14,6 +14,7 @@ from drfkit.models.parts import mean_and_log_variance
 from drfkit.models import recursion
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 from drfkit.models.sequence import _EncodedSequenceModel
+from drfkit.models.spec import ModelSpec
 
 TRANSITION_KINDS = ("lstm", "basis")
 # Observation variance of a memory dimension: the gain on its own (zero) observation is
@@ -51,6 +52,9 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     """
 
     kind = "drf"
+    spec = ModelSpec("DRF (ours)", "tab:blue", studies=("pendulum", "pedestrians"),
+                     bench_modes=("batched", "sequential", "naive", "no_sampling"),
+                     protocols={"paper": "paper", "book": "fit_physical_book_wide"})
     stream_follows = ("features", "run_filter", "filter_steps")
     #: its gains K_t (B, T, n, n) act on the latent state: mean diag K_t scores competency (gating)
     competency_gain = True

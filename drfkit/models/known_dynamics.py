@@ -37,9 +37,10 @@ import torch
 from torch import nn
 
 from drfkit.core.filter import ekf_update
-from drfkit.data import pendulum as pend
+from drfkit.data import pendulum_physics as pend
 from drfkit.models.parts import IMAGE_DOWNSAMPLES, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, check_n_samples
 from drfkit.models.sequence import SequenceModel, make_encoder
+from drfkit.models.spec import ModelSpec
 
 RK4_SUBSTEPS = 2  # RK4: against the generator's 500 semi-implicit Euler steps < 1e-4 rad after a frame (as 5 steps; tested)
 LOG_R_RANGE = OUTPUT_LOG_R_RANGE  # r of (cos, sin) on a bounded log scale, in the output's units
@@ -104,7 +105,9 @@ class KnownDynamicsFilter(SequenceModel):
     """The DRF family's encoder with an EKF on the pendulum's true equations (module docstring)."""
 
     kind = "known_dynamics"
-    display_label, display_color = "Known dynamics (EKF)", "tab:purple"
+    # the model-based reference of the book's protocol (drfkit.methods.protocols); the paper's trains it at its defaults
+    spec = ModelSpec("Known dynamics (EKF)", "tab:purple", studies=("pendulum",), reference=True,
+                     protocols={"book": "fit_known_dynamics_wide"})
     stream_follows = ("features", "filter_steps")
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, feature_dim: int = 64,

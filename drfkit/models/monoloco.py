@@ -34,6 +34,7 @@ from torch import nn
 
 from drfkit.models.parts import (KEYPOINT_FEATURES, N_KEYPOINTS, check_dropout_p, check_keypoints, check_n_samples,
                                  keypoint_box_centre, keypoint_features, mc_dropout)
+from drfkit.models.spec import ModelSpec
 from drfkit.models.sequence import (SequenceModel, check_loss_args, fill_padding, frame_mask,
                                     masked_mean)
 
@@ -63,6 +64,8 @@ class Monoloco(SequenceModel):
     """
 
     kind = "monoloco"
+    spec = ModelSpec("Monoloco", "tab:orange", studies=("pedestrians",),
+                     bench_modes=("published", "batched", "no_sampling"))  # its own schedule under every protocol
     per_frame = True
 
     def __init__(self, input_kind: str = "keypoints", out_dim: int = 1, hidden: int = 256,

@@ -53,6 +53,7 @@ from torch import nn
 from drfkit.models.parts import (IMAGE_DOWNSAMPLES, LOG_R_RANGE, NOISE_HEADS, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, Decoder, ImageEncoder, KeypointEncoder,
                                  ObservationHeads, SharedUniforms, check_dropout_p, check_n_samples,
                                  mean_and_log_variance)
+from drfkit.models.spec import ModelSpec
 
 INPUT_KINDS = ("pendulum", "keypoints")
 # how a belief [mean, log variance] becomes the output: the learned decoder (MC dropout), or read as it is
@@ -333,6 +334,8 @@ class NoDynamics(_EncodedSequenceModel):
     """Frame by frame: decoder([w_t, log r_t]); no state carried over time."""
 
     kind = "no_dynamics"
+    spec = ModelSpec("No dynamics", "tab:red", studies=("pendulum", "pedestrians"),
+                     protocols={"paper": "no_dynamics_paper", "book": "fit_no_dynamics_wide"})
     per_frame = True
 
     def features(self, inputs, return_gains=False):
@@ -350,6 +353,8 @@ class LSTMBaseline(_EncodedSequenceModel):
     belief_features = False  # its features are the LSTM's hidden state, not a [mean, log variance]
 
     kind = "lstm"
+    spec = ModelSpec("LSTM", "tab:green", studies=("pendulum", "pedestrians"),
+                     protocols={"paper": "lstm_paper", "book": "fit_lstm_wide"})
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  lstm_layers: int = 2, **kwargs: Any):

@@ -8,29 +8,30 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from drfkit.models.kinds import MODEL_CLASSES, model_spec
 from drfkit.study.registry import STUDIES
 
-# how the figures and tables name and colour a model (presentation, not the paper's numbers)
-# ('physics_bound' is a particle filter on no_dynamics' outputs: a reference, not a bound on any model)
-MODEL_LABELS = {"no_dynamics": "No dynamics", "lstm": "LSTM", "monoloco": "Monoloco", "drf": "DRF (ours)",
-                "physics_bound": "particle filter on no_dynamics (reference)",
-                "physics_reference": "particle filter on no_dynamics (reference)"}
-MODEL_COLORS = {"no_dynamics": "tab:red", "lstm": "tab:green", "monoloco": "tab:orange", "drf": "tab:blue"}
-
-
-def _model_attribute(model: str, name: str, default: str) -> str:
-    """A model kind's own ``display_label`` / ``display_color`` (a model added in one file brings its own)."""
-    from drfkit.models import MODEL_CLASSES
-
-    return getattr(MODEL_CLASSES.get(model), name, None) or default
+# How the figures and tables name a series that is no model kind ('physics_bound' is a particle filter on
+# no_dynamics' outputs: a reference, not a bound on any model). A model kind's label and colour are its
+# spec's (``drfkit.models.spec.ModelSpec``): presentation, not the paper's numbers.
+REFERENCE_LABELS = {"physics_bound": "particle filter on no_dynamics (reference)",
+                    "physics_reference": "particle filter on no_dynamics (reference)"}
 
 
 def label(model: str) -> str:
-    return MODEL_LABELS.get(model) or _model_attribute(model, "display_label", model)
+    """A model kind's label, a reference's, or the name itself."""
+    return model_spec(model).label if model in MODEL_CLASSES else REFERENCE_LABELS.get(model, model)
 
 
 def color(model: str) -> str:
-    return MODEL_COLORS.get(model) or _model_attribute(model, "display_color", "gray")
+    """A model kind's colour; grey for anything else."""
+    return model_spec(model).colour if model in MODEL_CLASSES else "gray"
+
+
+def drawn_in_colour(model: str) -> bool:
+    """Whether a line figure draws ``model`` in its colour, solid; a reference (the particle filter, a kind
+    whose spec says ``reference``) is drawn dashed in black."""
+    return model in MODEL_CLASSES and not model_spec(model).reference
 
 
 def new_figure(ncols: int = 1, nrows: int = 1, width: float = 4.5, height: float = 3.4, **kw):
@@ -150,7 +151,7 @@ def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[st
     """MAE per frame (mean over seeds) through a blackout, the blackout frames shaded.
     curves: columns model, seed, frame, mae (``drfkit.study.dynamics.blackout_curves``), and optionally
     protocol: then one panel per protocol (rows without a protocol, such as the reference's, are drawn
-    in every panel). A model absent from MODEL_COLORS (the particle-filter reference) is drawn dashed in black."""
+    in every panel). A reference (``drawn_in_colour``: the particle filter) is drawn dashed in black."""
     has_protocol = "protocol" in curves
     panels = (list(dict.fromkeys(curves["protocol"].dropna())) if has_protocol else []) or [None]
     fig, axes = new_figure(len(panels), width=6.0 if len(panels) == 1 else 4.2)
@@ -160,7 +161,7 @@ def plot_blackout(curves: pd.DataFrame, frames: tuple[int, int], models: list[st
                    label=f"pure-noise frames {frames[0]}–{frames[1] - 1}")
         for kind in models:
             mean = rows[rows["model"] == kind].groupby("frame")["mae"].mean()
-            known = kind in MODEL_COLORS
+            known = drawn_in_colour(kind)
             ax.plot(mean.index, mean.to_numpy(), color=color(kind) if known else "black", ls="-" if known else "--",
                     label=label(kind))
         ax.set_xlabel("frame"); ax.set_yscale("log")
@@ -185,7 +186,7 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
     for ax, tn in zip(axes[0], trains):
         for kind in models + ["physics_bound"]:
             mean = sweep[(sweep["train_noise"] == tn) & (sweep["model"] == kind)].groupby("test_noise")["mae"].mean()
-            known = kind in MODEL_COLORS
+            known = drawn_in_colour(kind)
             ax.plot(mean.index, mean.to_numpy(), marker="o", ms=3, color=color(kind) if known else "black",
                     ls="-" if known else "--", label=label(kind))
         ax.axvline(tn, color="gray", ls=":", lw=1, label=f"training noise ({tn:g})")
@@ -200,7 +201,7 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
     dark = table[table["test"] == "blackout"]
     for i, kind in enumerate(models + ["physics_bound"]):
         mean = dark[dark["model"] == kind].groupby("train_noise")["mae"].mean().reindex(trains)
-        known = kind in MODEL_COLORS
+        known = drawn_in_colour(kind)
         ax.bar(np.arange(len(trains)) + i * width, mean.to_numpy(), width, color=color(kind) if known else "black",
                label=label(kind))
     ax.set_xticks(np.arange(len(trains)) + width * len(models) / 2, [f"{tn:g}" for tn in trains])
@@ -374,7 +375,7 @@ def plot_training_curves(curves: pd.DataFrame, models: list[str] | None = None, 
 
 
 __all__ = [
-    "MODEL_LABELS", "MODEL_COLORS", "label", "color", "new_figure", "paper_value", "NOISE_PARAMETER", "TARGET_UNIT",
+    "REFERENCE_LABELS", "label", "color", "drawn_in_colour", "new_figure", "paper_value", "NOISE_PARAMETER", "TARGET_UNIT",
     "CI_TEXT", "plot_mae_bars", "plot_blackout", "plot_regime", "plot_picp_mpiw", "plot_sweep", "plot_calibration",
     "plot_training_curves",
 ]

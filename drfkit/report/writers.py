@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from drfkit.models import MODEL_CLASSES
+from drfkit.models.kinds import MODEL_CLASSES, model_spec
 from drfkit.report.figures import label, paper_value
 from drfkit.util.io import atomic_savefig, atomic_write_csv
 from drfkit.util.paths import figures_dir, tables_dir
@@ -149,7 +149,7 @@ def dynamics_lines(tables: Path) -> list[str]:
                   "better than it):", "",
                   ]
         # every model kind the map holds a column for, in the registry's order, so a new kind needs no edit here
-        kinds = [k for k in MODEL_CLASSES if k in rg.columns]
+        kinds = [k for k in MODEL_CLASSES if model_spec(k).report_column and k in rg.columns]
         lines += ["| trained at | test | " + " | ".join(label(k) for k in kinds)
                   + " | reference | DRF / no_dynamics | DRF / reference |",
                   "|---|---|" + "---|" * (len(kinds) + 3)]
@@ -169,7 +169,7 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
     number) and a verdict per protocol when there is more than one ("—" where a claim is judged
     under one protocol only). Ours, the rules and each claim's evidence (notebook section, tables,
     figures) are claims.md's, which the README links once instead of repeating them."""
-    from drfkit.study.claims import PEDESTRIAN_CLAIMS, read_claims
+    from drfkit.study.claims import CLAIMS, read_claims
 
     c = read_claims(claims_csv)
     protocols = list(dict.fromkeys(c["protocol"]))
@@ -179,7 +179,7 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
     for cid, rows in c.groupby("id", sort=False):
         by_protocol = dict(zip(rows["protocol"], rows["verdict"]))
         first = rows.iloc[0]
-        sim = " (simulated source)" if cid in PEDESTRIAN_CLAIMS else ""
+        sim = " (simulated source)" if cid in CLAIMS and CLAIMS[cid].simulated else ""
         verdicts = [f"**{by_protocol[p]}**{sim}" if p in by_protocol else "—" for p in protocols]
         cells = [cid, first["claim"], first["paper"]] + verdicts
         lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " |")

@@ -43,6 +43,8 @@ import numpy as np
 import pandas as pd
 import torch
 
+from drfkit.models.kinds import MODEL_CLASSES, model_spec
+from drfkit.models.spec import DEFAULT_BENCH_MODES
 from drfkit.study.registry import STUDIES as REGISTRY
 from drfkit.methods.timing.clock import single_calls, warm_timer, load_average
 
@@ -67,22 +69,27 @@ class _TimedStudies(Mapping):
         return len(REGISTRY)
 
 
-class _Modes(dict):
-    """model -> the modes it is timed in (see the module docstring); a model not listed is timed
-    with and without sampling (``DEFAULT_MODES``)."""
+class _Modes(Mapping):
+    """model -> the modes it is timed in (see the module docstring), read from its spec
+    (``ModelSpec.bench_modes``, by default with and without sampling: ``DEFAULT_MODES``) when asked;
+    a kind not registered is timed in the default modes."""
 
-    def __missing__(self, kind: str) -> tuple[str, ...]:
-        return DEFAULT_MODES
+    def __getitem__(self, kind: str) -> tuple[str, ...]:
+        return model_spec(kind).bench_modes if kind in MODEL_CLASSES else DEFAULT_MODES
+
+    def __contains__(self, kind: object) -> bool:
+        return kind in MODEL_CLASSES
+
+    def __iter__(self):
+        return iter(MODEL_CLASSES)
+
+    def __len__(self) -> int:
+        return len(MODEL_CLASSES)
 
 
 STUDIES = _TimedStudies()
-DEFAULT_MODES = ("batched", "no_sampling")
-MODES: dict[str, tuple[str, ...]] = _Modes({
-    "monoloco": ("published", "batched", "no_sampling"),
-    "drf": ("batched", "sequential", "naive", "no_sampling"),
-    "no_dynamics": DEFAULT_MODES,
-    "lstm": DEFAULT_MODES,
-})
+DEFAULT_MODES = DEFAULT_BENCH_MODES
+MODES: Mapping[str, tuple[str, ...]] = _Modes()
 COLUMNS = ["study", "model", "mode", "n_samples", "batch", "threads", "device", "median_ms_per_frame",
            "iqr_ms_per_frame", "median_ms_per_call", "ratio_to_monoloco_published", "ratio_to_no_sampling",
            "load_1min"]

@@ -1,7 +1,7 @@
 """``Study``: one registry entry, everything the book knows about a study in one place.
 
 A study is what the models are trained and judged on: its input kind and output size, the models it
-can train, the kind of its noise (``drfkit.data.noise.Noise``), the profile keys that hold its models
+can train (the registered model classes whose ``ModelSpec`` names it, ``Study.kinds``), the kind of its noise (``drfkit.data.noise.Noise``), the profile keys that hold its models
 and noise levels, the paper's claim on Kalman-gain gating it is judged by (``gating_claim``), and the
 callables that make its runs -- its data, what names that data in checkpoint hashes, each model's
 options and schedule under a training protocol, and the fresh training data of a protocol that
@@ -9,7 +9,7 @@ redraws it every epoch. The profile ``P`` is read here and in the
 callables only; what they return (``SequenceData``, a ``TrainConfig``, a dict of model options) is
 what the methods below take.
 
-This module imports only ``drfkit.data.noise``: each study's module (``drfkit.study.pendulum_runs``,
+This module imports only ``drfkit.data.noise`` and ``drfkit.models.kinds``: each study's module (``drfkit.study.pendulum_runs``,
 ``drfkit.study.pedestrian_runs``) builds its entry, ``drfkit.study.registry`` lists them.
 """
 from __future__ import annotations
@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from drfkit.data.noise import Noise, check_noise
+from drfkit.models.kinds import kinds_of
 
 
 def no_fresh_training(P, protocol: str, noise=None) -> None:
@@ -30,7 +31,6 @@ class Study:
     name: str
     input_kind: str                # the models' input: 'pendulum' images or 'keypoints'
     out_dim: int                   # outputs per frame
-    kinds: tuple[str, ...]         # every model kind the study can train (a profile picks a subset)
     section: str                   # the profile's section of the study (P.<section>, drfkit.study.profile)
     models_key: str                # key in that section: the models a profile trains
     train_level_key: str           # key in that section: the training noise
@@ -58,6 +58,13 @@ class Study:
     noise_name: str = "noise"      # the noise parameter's name on axes ("p" alone reads as a dropout rate)
     target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
     target_unit: str = ""          # its unit, on axes
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """Every model kind the study can train (a profile picks a subset): the registered model classes
+        whose spec names the study or its section (``ModelSpec.studies``), in registration order -- so a
+        variant entry on the same section trains the same models."""
+        return kinds_of(self.name, self.section)
 
     def _get(self, P, key: str) -> Any:
         """``P.<section>.<key>``: a value of the study's section of the typed profile."""

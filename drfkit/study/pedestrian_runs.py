@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from drfkit.data import nuscenes
-from drfkit.data.noise import Noise, check_noise
+from drfkit.data.noise import Noise, pedestrian_corruption
 from drfkit.data.records import check_records, make_sequences, split_by_scene
 from drfkit.data.sequence_data import SequenceData
 from drfkit.data.sim_detector import DetectorConfig, simulate_records
@@ -52,13 +52,14 @@ def load_simulated_pedestrians(
     detector: DetectorConfig | Mapping[str, Any] | None = None,
     simulation: Mapping[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Simulated pedestrian records under salt-and-pepper ``noise``:
+    """Simulated pedestrian records under ``noise`` (a kind with a pedestrian corruption,
+    ``drfkit.data.noise.PEDESTRIAN_CORRUPTIONS``: the paper's salt-and-pepper):
     ``simulate_truth(n_scenes, frames_per_scene, seed, **simulation)`` observed by
     ``simulate_records(truth, noise, seed, detector)``, cached as ``<cache_dir>/pedestrians-sim-<hash>.npz``
     with every parameter in the hash. The records pass ``check_records``."""
     from drfkit.util.io import cached_npz
 
-    check_noise(noise, "salt_and_pepper", "the pedestrian data")
+    pedestrian_corruption(noise, "the pedestrian data")
     detector = DetectorConfig.from_dict(detector)
     simulation = dict(simulation or {})
     params = {
@@ -91,7 +92,8 @@ def load_pedestrians(
     cameras: tuple[str, ...] | None = None,
     simulation: Mapping[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Pedestrian records under salt-and-pepper ``noise`` from either source (``ped_source``).
+    """Pedestrian records under ``noise`` (salt-and-pepper, or another kind with a pedestrian corruption)
+    from either source (``ped_source``).
 
     source='simulated': ``load_simulated_pedestrians`` (cached under
     ``cache_dir``). source='nuscenes': ``drfkit.data.nuscenes.load_nuscenes_records`` reading the tables
@@ -99,7 +101,7 @@ def load_pedestrians(
     (``noise_dir_name``, e.g. ``p0.025``); the simulation arguments are ignored, and nothing is
     cached (the files on disk are the source of truth). Both return records that pass ``check_records``.
     """
-    check_noise(noise, "salt_and_pepper", "the pedestrian data")
+    pedestrian_corruption(noise, "the pedestrian data")
     if source == "simulated":
         return load_simulated_pedestrians(cache_dir, noise, n_scenes=n_scenes, frames_per_scene=frames_per_scene,
                                           seed=seed, detector=detector, simulation=simulation)
@@ -116,10 +118,11 @@ def load_pedestrians(
 
 
 def pedestrian_records(P, noise: Noise | float | None = None) -> dict[str, Any]:
-    """Per-detection records under ``noise`` (a ``Noise`` or its salt-and-pepper p; default the training
-    noise), all splits."""
+    """Per-detection records under ``noise``, all splits: a ``Noise`` as given (any kind with a pedestrian
+    corruption: the registry entry that calls decides), or a salt-and-pepper p (None: the training noise)."""
+    noise = noise if isinstance(noise, Noise) else PEDESTRIANS.noise(noise, P)
     return load_pedestrians(
-        data_dir(P.profile), P.pedestrians.source, PEDESTRIANS.noise(noise, P), n_scenes=P.pedestrians.n_scenes,
+        data_dir(P.profile), P.pedestrians.source, noise, n_scenes=P.pedestrians.n_scenes,
         frames_per_scene=P.pedestrians.frames_per_scene, seed=P.pedestrians.data_seed,
         detector=DetectorConfig.from_dict(P.pedestrians.sim_detector),
         nuscenes_root=P.pedestrians.nuscenes_root or None, predictions_root=P.pedestrians.pifpaf_predictions or None,
@@ -183,7 +186,7 @@ def pedestrian_train_config(P, kind: str, seed: int, protocol: str = "paper") ->
 
 
 PEDESTRIANS = Study(
-    "pedestrians", "keypoints", 1, ("drf", "no_dynamics", "lstm", "monoloco"), section="pedestrians",
+    "pedestrians", "keypoints", 1, section="pedestrians",
     models_key="models", train_level_key="train_p", eval_levels_key="eval_p", sweep_key="sweep_p",
     training_notebook="03_nuscenes_training", noise_kind="salt_and_pepper", protocols_key="protocols",
     all_protocols=tuple(PEDESTRIAN_PROTOCOLS), data=pedestrian_data, data_key=pedestrian_data_key,

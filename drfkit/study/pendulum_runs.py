@@ -116,7 +116,7 @@ def pendulum_fresh_training(P, protocol: str, noise: Noise | float | None = None
 
 
 PENDULUM = Study(
-    "pendulum", "pendulum", 2, ("drf", "no_dynamics", "lstm", "known_dynamics"), section="pendulum",
+    "pendulum", "pendulum", 2, section="pendulum",
     models_key="models", train_level_key="train_max_noise", eval_levels_key="eval_max_noise",
     sweep_key="sweep_max_noise", training_notebook="01_pendulum_training", noise_kind="rkn_uniform",
     protocols_key="protocols",

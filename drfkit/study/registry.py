@@ -2,15 +2,19 @@
 study's facts looks here, and nothing outside a study's entry branches on its name.
 
 Adding a study is one module that builds its ``Study`` (its data and run callables, as
-``drfkit.study.pendulum_runs`` does), one line below, and its keys in ``drfkit.study.params``.
+``drfkit.study.pendulum_runs`` does), one line below, and its keys in ``drfkit.study.params``. A variant
+of a study on the same profile section (another noise kind, say: ``dataclasses.replace(PENDULUM,
+name=..., noise_kind=...)``) needs no key of its own: an extension file registers it with
+``STUDIES.register`` (``drfkit.util.registry``).
 """
 from __future__ import annotations
 
 from drfkit.study.entry import Study
 from drfkit.study.pedestrian_runs import PEDESTRIANS
 from drfkit.study.pendulum_runs import PENDULUM
+from drfkit.util.registry import Registry
 
-STUDIES: dict[str, Study] = {s.name: s for s in (PENDULUM, PEDESTRIANS)}
+STUDIES: Registry = Registry("study", {s.name: s for s in (PENDULUM, PEDESTRIANS)})
 
 
 def study(name: str) -> Study:

@@ -1,5 +1,8 @@
-"""Claims C6 and C7: what the DRF's uncertainty costs (C6, the inference benchmark of notebook 05) and
-whether the Kalman gain tells which frames need it (C7, the gating sweep of notebook 06)."""
+"""What the Kalman-gain gating claims (C7a on the pendulum, C7b on the pedestrians: the paper's claims on
+what the uncertainty costs and whether the gain tells which frames need it) share: the threshold sweep's
+numbers, the time test, ``GatingClaim`` (a gating claim's words and verdict, each in its own module) and
+``c7_gating``, which judges one on a study's sweep (notebook 06). C6, the other efficiency claim, is
+``c6_uncertainty_speedup``."""
 from __future__ import annotations
 
 import math
@@ -9,52 +12,8 @@ from typing import Any, Callable
 import pandas as pd
 
 from drfkit.study import paper
-from drfkit.study.claims.verdicts import (NOT, NOT_TESTABLE, PARTLY, REPRODUCED, at_most, fmt_interval,
-                                          seed_interval)
-
-# ------------------------------------------------------------------------------ C6
-# Reproduced: within 15 % of the paper's 2.93x either way, about the spread of such timings across
-# machines; a ratio far above it is a different finding (as in C4), not the paper's.
-C6_TOLERANCE = 0.15
-C6_CLEARLY_FASTER = 1.5
-# Notebook 05's two targets of the book (not claims of the paper; C6 judges the paper's 2.93x):
-# DRF's S-sample prediction at least 3x faster per frame than Monoloco as published at batch 1,
-# because the paper's claim is "~3x faster" and the book's DRF should meet that round figure itself.
-TIMING_SPEEDUP_TARGET = 3.0
-# ... and at most 1.25x DRF's own deterministic pass, because only the decoder is sampled, in one
-# batched call, so the S samples should add at most a quarter to the features' cost.
-SAMPLING_OVERHEAD_TARGET = 1.25
-
-
-def c6_speedup(speedup: float, target: float = paper.TIMING_SPEEDUP,
-               spread: tuple[float, float] | None = None) -> dict[str, Any]:
-    """``speedup``: Monoloco as published / DRF batched, per frame at batch 1; ``spread``: its range
-    over the rounds' interquartile ranges (``speedup_spread``)."""
-    lo, hi = target * (1 - C6_TOLERANCE), target * (1 + C6_TOLERANCE)
-    verdict = (REPRODUCED if at_most(lo, speedup) and at_most(speedup, hi)
-               else PARTLY if at_most(C6_CLEARLY_FASTER, speedup) else NOT)
-    ours = f"{speedup:.2f}x at batch 1" + (f" [{spread[0]:.2f}, {spread[1]:.2f}] over the rounds' interquartile "
-                                           "ranges" if spread is not None else "")
-    if verdict == PARTLY and speedup > hi:
-        ours += f"; {speedup / target:.1f}x the paper's factor"
-    return {"id": "C6", "claim": "DRF computes aleatoric + epistemic uncertainty ~3x faster than Monoloco "
-                                 "(25 passes, after keypoint extraction)",
-            "paper": f"{paper.TIMING_MS['monoloco']} ms vs {paper.TIMING_MS['drf']} ms, {target}x (GTX 1080)",
-            "ours": ours,
-            "rule": "speed-up = Monoloco as published (25 sequential passes) / DRF (25 batched decoder samples), "
-                    "per frame at batch 1, measured in one run (medians over interleaved rounds); reproduced: "
-                    f"within {100 * C6_TOLERANCE:.0f} % of the paper's {target}x either way ({lo:.2f}-{hi:.2f}x, "
-                    "about the spread of such timings across machines); partly: outside that band but at least "
-                    f"{C6_CLEARLY_FASTER:g}x (faster, by a different factor than the paper's: a ratio far above "
-                    "it is another finding, as in C4); else not reproduced",
-            "verdict": verdict}
-
-
-def speedup_spread(mono_median: float, mono_iqr: float, drf_median: float, drf_iqr: float) -> tuple[float, float]:
-    """The speed-up's range when each median moves by half its interquartile range against the other."""
-    return ((mono_median - mono_iqr / 2) / (drf_median + drf_iqr / 2),
-            (mono_median + mono_iqr / 2) / max(drf_median - drf_iqr / 2, 1e-12))
-
+from drfkit.study.claims.verdicts import NOT_TESTABLE, at_most, fmt_interval, rows_of, seed_interval
+from drfkit.util.registry import Registry
 
 # ------------------------------------------------------------------------------ C7
 # The sweep's fractions averaged: the validation-quantile targets strictly between never and always
@@ -90,7 +49,7 @@ def sampling_share(settings: pd.DataFrame, study: str) -> float:
     return float(1 - t["no_dropout"] / t["always"])
 
 
-def _time_test(sweep: pd.DataFrame, settings: pd.DataFrame, study: str) -> tuple[bool, str]:
+def time_test(sweep: pd.DataFrame, settings: pd.DataFrame, study: str) -> tuple[bool, str]:
     """The Kalman-gain sweep's first fraction (seed means) within C7_NEAR_ALWAYS of always-dropout's
     PICP, and whether its time is <= C7_TIME_RATIO x always's."""
     always = settings[(settings["study"] == study) & (settings["setting"] == "always")].iloc[0]
@@ -105,7 +64,7 @@ def _time_test(sweep: pd.DataFrame, settings: pd.DataFrame, study: str) -> tuple
                                            f"{100 * first['fraction']:.0f}% of frames at {ratio:.2f}x its time")
 
 
-def _tuned_reference(tuned: dict[str, pd.DataFrame] | None, study: str) -> str:
+def tuned_reference(tuned: dict[str, pd.DataFrame] | None, study: str) -> str:
     parts = []
     for name, table in (tuned or {}).items():
         t = table[table["study"] == study].set_index("setting")
@@ -115,61 +74,16 @@ def _tuned_reference(tuned: dict[str, pd.DataFrame] | None, study: str) -> str:
     return ("; gates tuned on validation (a reference, not judged): " + "; ".join(parts)) if parts else ""
 
 
-def _paper_share(g: dict) -> float:
+def paper_share(g: dict) -> float:
     """MC dropout's share of the per-frame cost in a paper gating row (setting -> (PICP %, MPIW, time ms)), in %."""
     return 100 * (1 - g["no_dropout"][2] / g["always"][2])
 
 
-def _quote_c7a(g: dict) -> str:
-    """The paper's gating row ``g`` (``paper.GATING``: setting -> (PICP %, MPIW, time ms)) as C7a quotes it:
-    PICP and time beside always-dropout."""
-    return (f"{g['kalman_gain'][0]:.1f} % vs {g['always'][0]:.1f} % (always) at {g['kalman_gain'][2]:.1f} vs "
-            f"{g['always'][2]:.1f} ms; random {g['random'][0]:.1f} % (KG - random "
-            f"{g['kalman_gain'][0] - g['random'][0]:+.1f} points); MC dropout {_paper_share(g):.0f} % of the per-frame "
-            "cost")
-
-
-def _quote_c7b(g: dict) -> str:
-    """The paper's gating row ``g`` as C7b quotes it: Kalman-gain against random gating."""
-    return (f"{g['kalman_gain'][0]:.1f} % (KG) vs {g['random'][0]:.1f} % (random): "
-            f"{g['kalman_gain'][0] - g['random'][0]:+.1f} points")
-
-
-_SWEEP_WORDS = (f"KG - random = PICP of Kalman-gain minus random gating at equal fraction, paired by seed, averaged "
-                f"over the sweep's fractions {C7_FRACTIONS[0]:g}-{C7_FRACTIONS[1]:g} (validation-score quantiles: "
-                "no threshold is tuned), mean over seeds with a 95 % t-interval")
+SWEEP_WORDS = (f"KG - random = PICP of Kalman-gain minus random gating at equal fraction, paired by seed, averaged "
+               f"over the sweep's fractions {C7_FRACTIONS[0]:g}-{C7_FRACTIONS[1]:g} (validation-score quantiles: "
+               "no threshold is tuned), mean over seeds with a 95 % t-interval")
 
 Interval = tuple[float, float, float]
-
-
-def _judge_c7a(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None, gain: Interval, room: Interval,
-               ours: str, reference: str) -> tuple[str, str]:
-    """C7a's verdict and 'ours': KG - random above 0, and the time test where MC dropout dominates the cost."""
-    time_note, time_ok = "time test not measured (no settings table)", None
-    if settings is not None:
-        share = sampling_share(settings, study)
-        if share < C7_MIN_SAMPLING_SHARE:
-            time_note = (f"time test not applicable on this machine: MC dropout is {100 * share:.0f}% of the "
-                         f"per-frame cost here (the paper's: 91 %), so even gating no frame cannot save a "
-                         f"quarter of always-dropout's time")
-        else:
-            time_ok, words = _time_test(sweep, settings, study)
-            time_note = f"time test {'passed' if time_ok else 'failed'}: {words} (MC dropout {100 * share:.0f}% of the cost)"
-    beats = gain[1] > 0  # NaN (one seed) compares False
-    verdict = (REPRODUCED if beats and time_ok is not False else
-               PARTLY if gain[0] > 0 else NOT)
-    return verdict, f"{ours}; {time_note}{reference}"
-
-
-def _judge_c7b(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None, gain: Interval, room: Interval,
-               ours: str, reference: str) -> tuple[str, str]:
-    """C7b's verdict and 'ours': KG - random within the no-gain band, unless even an oracle could not leave it."""
-    band = C7_NO_GAIN_BAND
-    if not math.isnan(room[0]) and at_most(room[0], band):
-        return NOT_TESTABLE, f"{ours}: even a perfect gate is within {100 * band:g} point of random here{reference}"
-    inside = at_most(abs(gain[1]), band) and at_most(abs(gain[2]), band)  # NaN bounds: not inside
-    verdict = REPRODUCED if inside else PARTLY if at_most(abs(gain[0]), band) else NOT
-    return verdict, ours + reference
 
 
 @dataclass(frozen=True)
@@ -189,23 +103,13 @@ class GatingClaim:
                 "rule": self.rule, "verdict": verdict}
 
 
-GATING_CLAIMS: dict[str, GatingClaim] = {c.id: c for c in (
-    GatingClaim("C7a", "pendulum", "Pendulum: Kalman-gain gating keeps PICP near always-dropout at much less time", _quote_c7a,
-                f"{_SWEEP_WORDS}; time test, applicable where MC dropout is at least "
-                f"{100 * C7_MIN_SAMPLING_SHARE:.0f} % of the per-frame cost (1 - time without dropout / time "
-                f"always; the paper's: 91 %): the Kalman-gain curve reaches PICP within "
-                f"{100 * C7_NEAR_ALWAYS:g} points of always-dropout at <= {C7_TIME_RATIO:g} x its time; "
-                "reproduced: the interval of KG - random is above 0 and the time test passes or is not "
-                "applicable (then the verdict is on coverage alone, and says so); partly: KG - random above "
-                "0 in the seed mean only, or the time test fails; else not reproduced; not testable "
-                "without sweep rows", _judge_c7a),
-    GatingClaim("C7b", "pedestrians", "Pedestrians: Kalman-gain gating brings no clear gain over random gating", _quote_c7b,
-                f"{_SWEEP_WORDS}; reproduced: the interval lies within +/- {100 * C7_NO_GAIN_BAND:g} point "
-                "(no gain, beyond seed noise; the paper's gap is 0.3 points); partly: the mean within it, the "
-                "interval not; else not reproduced; not testable when an oracle gate (the frames of largest "
-                f"true error, same count) beats random by at most {100 * C7_NO_GAIN_BAND:g} point: then no gate "
-                "could be told from random", _judge_c7b),
-)}
+# claim id -> GatingClaim: the claims a study's registry entry may name (``Study.gating_claim``)
+GATING_CLAIMS = Registry("gating claim")
+
+# where every gating claim is judged: notebook 06's section, tables and figures (``table.Claim``'s fields)
+GATING_EVIDENCE = dict(notebook="06_competency_gating", section="Claim C7, with computed verdicts",
+                       tables=("gating_sweep.csv", "gating_summary.csv", "gating_summary_train_noise.csv"),
+                       figures=("gating_picp_fraction.png", "gating_sweep.png"), reads="gating")
 
 
 def gating_claim(study: str, claim: str | None = None) -> GatingClaim:
@@ -239,12 +143,31 @@ def c7_gating(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None = N
     ours = f"KG - random {fmt_interval(gain, 100, 2, True, ' pt')}"
     ours += ("; oracle (frames of largest true error) - random " + fmt_interval(room, 100, 2, True, " pt")
              if not math.isnan(room[0]) else "; oracle curve not in this sweep (notebook 06 adds it)")
-    reference = _tuned_reference(tuned, study)
+    reference = tuned_reference(tuned, study)
     if math.isnan(gain[0]):
         return rule.row(NOT_TESTABLE, "no sweep rows between never and always" + reference)
     return rule.row(*rule.judge(sweep, study, settings, gain, room, ours, reference))
 
 
-__all__ = ["C6_TOLERANCE", "TIMING_SPEEDUP_TARGET", "SAMPLING_OVERHEAD_TARGET", "c6_speedup", "speedup_spread",
-           "C7_FRACTIONS", "C7_NO_GAIN_BAND", "C7_NEAR_ALWAYS", "C7_TIME_RATIO", "C7_MIN_SAMPLING_SHARE",
-           "sweep_gain", "sampling_share", "GatingClaim", "GATING_CLAIMS", "gating_claim", "c7_gating"]
+def judge_gating_claim(gating, claim: str) -> list[tuple[str, dict]]:
+    """The rows of the gating claim ``claim`` per protocol, one per study whose registry entry names it
+    (``judge.GatingTables``: notebook 06's sweep, its settings summary for the time test, and the gates
+    tuned on validation at the test and at the training noise, reported as references)."""
+    rows = []  # (protocol, row): ``table.Rows``, not imported here to keep the import chains short
+    for study, named, protocols in gating.studies:
+        if named != claim:
+            continue
+        for protocol in protocols:
+            part = rows_of(gating.sweep, study, protocol)
+            if part.empty:
+                continue
+            pick = lambda t: None if t is None else rows_of(t, study, protocol)  # noqa: E731
+            tuned = {k: v for k, v in (("tuned at the test noise", pick(gating.settings)),
+                                       ("tuned at the training noise", pick(gating.trained))) if v is not None}
+            rows.append((protocol, c7_gating(part, study, pick(gating.settings), tuned, claim=claim)))
+    return rows
+
+
+__all__ = ["C7_FRACTIONS", "C7_NO_GAIN_BAND", "C7_NEAR_ALWAYS", "C7_TIME_RATIO", "C7_MIN_SAMPLING_SHARE",
+           "sweep_gain", "sampling_share", "GatingClaim", "GATING_CLAIMS", "GATING_EVIDENCE", "gating_claim",
+           "c7_gating", "judge_gating_claim"]

@@ -1,5 +1,6 @@
-"""What every rule shares: the verdicts, the saturation and rounding constants, and the numbers a
-rule reads from a summary or from per-seed rows, each with its 95 % Student-t interval over seeds."""
+"""What every rule shares: the verdicts, the saturation and rounding constants, the numbers a rule
+reads from a summary or from per-seed rows (each with its 95 % Student-t interval over seeds), the
+slices of a profile's tables a rule is fed, and the PICP–MPIW curve comparison of C2 and C5."""
 from __future__ import annotations
 
 import math
@@ -76,5 +77,64 @@ def paired_difference(by_seed: pd.DataFrame, a: str, b: str, noise: float, metri
     return seed_interval((table[a] - table[b]).dropna())
 
 
+def rows_of(frame: pd.DataFrame, study: str, protocol: str) -> pd.DataFrame:
+    """The rows of one study's models trained under one protocol (a table with study, protocol columns)."""
+    return frame[frame["study"].eq(study) & frame["protocol"].eq(protocol)]
+
+
+def at_levels(frame: pd.DataFrame, levels) -> pd.DataFrame:
+    """The rows at any of the noise ``levels`` (compared as floats, so 0.75 finds '0.75' and 0.750000001)."""
+    return frame[frame["noise"].astype(float).apply(lambda v: any(math.isclose(v, float(lv)) for lv in levels))]
+
+
+# ------------------------------------------------------------------------------ PICP–MPIW curves (C2, C5)
+def dominance(curve: pd.DataFrame, model: str, baseline: str, x: str = "mpiw", y: str = "picp",
+              y_model: str | None = None, y_base: str | None = None) -> float:
+    """Fraction of ``model``'s curve points (within the baseline's x-range) lying above the
+    baseline's curve interpolated linearly in x. NaN if the ranges do not overlap or a column is
+    missing. ``y_model`` / ``y_base`` compare other columns than ``y`` (e.g. the model's lower
+    interval bound against the baseline's upper one: above beyond the seeds' intervals)."""
+    ya, yb = y_model or y, y_base or y
+    a = curve[curve["model"] == model].sort_values(x)
+    b = curve[curve["model"] == baseline].sort_values(x)
+    if ya not in a.columns or yb not in b.columns or not len(b):
+        return math.nan
+    inside = a[(a[x] >= b[x].min()) & (a[x] <= b[x].max())]
+    if len(inside) == 0 or len(b) < 2:
+        # Outside the baseline's range: above-and-left of its narrowest point also dominates.
+        left = a[(a[x] <= b[x].min()) & (a[ya] >= b.loc[b[x].idxmin(), yb])]
+        return float(len(left) > 0) if len(a) else math.nan
+    return float(np.mean(inside[ya].to_numpy() > np.interp(inside[x], b[x], b[yb])))
+
+
+def curve_shares(sub: pd.DataFrame, base: str) -> tuple[float, float]:
+    """(share of DRF points above the baseline's curve in seed means, share above it beyond the seeds'
+    95 % intervals: DRF's lower PICP bound above the baseline's upper one)."""
+    return dominance(sub, "drf", base), dominance(sub, "drf", base, y_model="picp_lo", y_base="picp_hi")
+
+
+def share_text(share: float, beyond: float) -> str:
+    if math.isnan(share):
+        return "n/a"
+    return f"{100 * share:.0f}%" + ("" if math.isnan(beyond) else f" ({100 * beyond:.0f}% beyond the seeds' intervals)")
+
+
+def curve_verdict(shares: dict) -> str:
+    """The verdict of ``CURVE_RULE`` on (share, share beyond the intervals) per comparison."""
+    vals = [s for s, _ in shares.values() if not math.isnan(s)]
+    if not vals:
+        return NOT_TESTABLE
+    beyond = [b for s, b in shares.values() if not math.isnan(s)]
+    return (REPRODUCED if all(at_most(1.0, b) for b in beyond) else PARTLY if np.mean(vals) >= 0.5 else NOT)
+
+
+CURVE_RULE = ("reproduced: every DRF point lies above every baseline's curve at equal MPIW beyond the seeds' 95 % "
+              "intervals (DRF's lower PICP bound above the baseline's upper bound, interpolated); partly: on "
+              "average at least half of the DRF points lie above in seed means; else not reproduced; a comparison "
+              f"where every PICP is >= {100 * SATURATED_PICP:g}% is left out as not informative (intervals that "
+              "cover everything cannot be ranked by coverage); not testable if none is left")
+
+
 __all__ = ["REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "VERDICTS", "SATURATED_PICP", "at_most",
-           "seed_interval", "fmt_interval", "cell", "fmt", "paired_difference"]
+           "seed_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
+           "curve_shares", "share_text", "curve_verdict", "CURVE_RULE"]

@@ -1,0 +1,87 @@
+"""Claim C4: on the pedestrians, in distribution (p 0.01), the DRF's MAE is comparable to Monoloco's
+(``drfkit.study.paper.PEDESTRIAN_MAE``: equal, 2.56 m both)."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from drfkit.study import paper
+from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO, monoloco_name
+from drfkit.study.claims.table import CLAIMS, Claim, Rows
+from drfkit.study.claims.verdicts import (BETTER, NOT, NOT_TESTABLE, PARTLY, REPRODUCED, at_levels, at_most, cell, fmt,
+                                          fmt_interval, rows_of, seed_interval)
+
+PARITY_BAND = 0.10
+
+
+def relative_difference(by_seed: pd.DataFrame, a: str, b: str, noise: float) -> tuple[float, float, float]:
+    """Per seed MAE_a / MAE_b - 1 at ``noise`` (paired by seed), mean and 95 % t-interval."""
+    rows = by_seed[np.isclose(by_seed["noise"].astype(float), noise)]
+    table = rows.pivot_table(index="seed", columns="model", values="mae")
+    if a not in table or b not in table:
+        return math.nan, math.nan, math.nan
+    return seed_interval((table[a] / table[b] - 1).dropna())
+
+
+def c4_in_distribution_parity(mae: pd.DataFrame, noise: float = 0.01, by_seed: pd.DataFrame | None = None,
+                              comparator: str = MATCHED_MONOLOCO, note: str = "") -> dict[str, Any]:
+    """DRF's in-distribution MAE against ``comparator``'s (default: the input-matched Monoloco), from a
+    summary ``mae``; ``by_seed`` (per-seed rows of both) adds the interval of the paired relative
+    difference; ``note`` follows the comparator's number. Monoloco as published, when in ``mae``, is
+    reported beside it."""
+    name = monoloco_name
+    row = {"id": "C4", "claim": "Pedestrians in distribution (p 0.01): DRF comparable to Monoloco",
+           "paper": f"{paper.PEDESTRIAN_MAE[0.01]['drf']:.2f} m vs {paper.PEDESTRIAN_MAE[0.01]['monoloco']:.2f} m",
+           "rule": "comparable = within 10 % either way (the paper reports equal MAE; 10 % is the book's band: "
+                   "half the 18 % the paper calls an improvement in C3), against Monoloco fed the DRF family's "
+                   "inputs (as published it is a second, unjudged comparison); reproduced: /MAE_DRF / "
+                   "MAE_Monoloco - 1/ <= 10 % in seed means (the paired per-seed interval shown beside it); better "
+                   "than the paper's parity: DRF more than 10 % lower (a different finding, not parity); partly: "
+                   "DRF 10-25 % higher; else not reproduced; not testable without that Monoloco"}
+    d = cell(mae, "drf", "mae", noise=noise)
+    try:
+        m = cell(mae, comparator, "mae", noise=noise)
+    except KeyError:
+        return {**row, "ours": f"DRF {fmt(mae, 'drf', 'mae', 3, noise=noise)} m; {name(comparator)} not evaluated "
+                               "(notebook 03)", "verdict": NOT_TESTABLE}
+    rel = (d - m) / m
+    paired = relative_difference(by_seed, "drf", comparator, noise) if by_seed is not None else (rel, math.nan, math.nan)
+    verdict = (REPRODUCED if at_most(abs(rel), PARITY_BAND) else BETTER if rel < 0
+               else PARTLY if at_most(rel, 0.25) else NOT)
+    ours = (f"DRF {fmt(mae, 'drf', 'mae', 3, noise=noise)} m vs {name(comparator)} "
+            f"{fmt(mae, comparator, 'mae', 3, noise=noise)} m{note} ({100 * rel:+.1f}%"
+            + ("" if math.isnan(paired[1]) else f"; paired by seed {fmt_interval(paired, 100, 1, True, '%')}") + ")")
+    if comparator != PUBLISHED_MONOLOCO and (mae["model"] == PUBLISHED_MONOLOCO).any():
+        p = cell(mae, PUBLISHED_MONOLOCO, "mae", noise=noise)
+        ours += (f"; second comparison, not judged: {name(PUBLISHED_MONOLOCO)} "
+                 f"{fmt(mae, PUBLISHED_MONOLOCO, 'mae', 3, noise=noise)} m ({100 * (d - p) / p:+.1f}%)")
+    return {**row, "ours": ours, "verdict": verdict}
+
+
+def judge(ood) -> Rows:
+    """C4 per protocol at the profile's training level (``pedestrians.train_p``) on notebook 04's pedestrian
+    summary, with notebook 03's input-matched Monoloco (``judge.OodTables``)."""
+    rows: Rows = []
+    for protocol, judged in ood.by_protocol():
+        if ("pedestrians", protocol) not in judged:
+            continue
+        by_seed = rows_of(ood.evals, "pedestrians", protocol)
+        if ood.matched_seeds is not None:
+            by_seed = pd.concat([by_seed, ood.matched_seeds], ignore_index=True)
+        mae = at_levels(rows_of(ood.summary, "pedestrians", protocol), ood.paper_noise["pedestrians"])
+        if ood.matched is not None:
+            mae = pd.concat([mae, ood.matched], ignore_index=True)
+        rows.append((protocol, c4_in_distribution_parity(mae, ood.P.pedestrians.train_p, by_seed=by_seed,
+                                                         note=ood.matched_note)))
+    return rows
+
+
+CLAIM = CLAIMS.register("C4", Claim(
+    "C4", "04_ood_noise_evaluation", "notebook 04, pedestrians", "Claims C1–C5, with computed verdicts",
+    ("ood_all_metrics.csv", "pedestrians_monoloco_inputs.csv"), ("pedestrians_mae.png",), judge, reads="ood",
+    simulated=True))
+
+__all__ = ["PARITY_BAND", "relative_difference", "c4_in_distribution_parity"]

@@ -1,0 +1,59 @@
+"""Claim C5: under shift, the DRF keeps a higher PICP with a narrower MPIW than the baselines, on both
+studies (the paper's pedestrian and pendulum figures at their out-of-distribution levels)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from drfkit.study.claims.table import CLAIMS, Claim, Rows
+from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, curve_shares, curve_verdict, rows_of,
+                                          share_text)
+
+
+def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, float]],
+                             baselines: dict[str, list[str]]) -> dict[str, Any]:
+    """Under shift, DRF keeps a higher PICP with a narrower MPIW: judged over the PICP–MPIW curves
+    (one point per inference dropout rate), as C2 is.
+
+    curves: rows with columns study, model, noise, picp, mpiw (and picp_lo, picp_hi; one per dropout
+    rate; a single rate per model reduces to comparing points); conditions: (study, noise) pairs out
+    of distribution; baselines: study -> models. A comparison where every PICP of both is saturated
+    is not informative and left out.
+    """
+    shares, parts = {}, []
+    for study, lv in conditions:
+        sub = curves[(curves["study"] == study) & np.isclose(curves["noise"].astype(float), lv)]
+        for base in baselines[study]:
+            pair = sub[sub["model"].isin(["drf", base])]
+            if len(pair) and bool((pair["picp"] >= SATURATED_PICP).all()):
+                parts.append(f"{study}@{lv} vs {base}: not informative (every PICP >= {100 * SATURATED_PICP:g}%)")
+                continue
+            shares[(study, lv, base)] = curve_shares(sub, base)
+            parts.append(f"{study}@{lv} vs {base}: {share_text(*shares[(study, lv, base)])}")
+    return {"id": "C5", "claim": "Under shift, DRF keeps a higher PICP with a narrower MPIW than the baselines",
+            "paper": "pedestrians p 0.025/0.05: DRF's curve above all; pendulum at 0.75 likewise",
+            "ours": "share of DRF curve points above the baseline's curve at equal MPIW: " + "; ".join(parts),
+            "rule": "over the PICP–MPIW curves (inference dropout rates), at each out-of-distribution level; "
+                    + CURVE_RULE,
+            "verdict": curve_verdict(shares)}
+
+
+def judge(ood) -> Rows:
+    """C5 per protocol over every study of notebook 04 (``judge.OodTables``), each study's models of that
+    protocol (or of the paper's, for a study that does not train it) at its shifted levels."""
+    rows: Rows = []
+    for protocol, judged in ood.by_protocol():
+        shift = pd.concat([rows_of(ood.curves, s, pr) for s, pr in judged], ignore_index=True)
+        conditions = [(s, lv) for s, _ in judged for lv in ood.shifted[s]]
+        rows.append((protocol, c5_intervals_under_shift(shift, conditions, ood.baselines)))
+    return rows
+
+
+CLAIM = CLAIMS.register("C5", Claim(
+    "C5", "04_ood_noise_evaluation", "notebook 04, both studies", "The paper's figures, redrawn",
+    ("ood_all_metrics.csv", "ood_picp_mpiw.csv"), ("pendulum_picp_mpiw.png", "pedestrians_picp_mpiw.png"), judge,
+    reads="ood"))
+
+__all__ = ["c5_intervals_under_shift"]
