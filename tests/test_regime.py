@@ -94,3 +94,20 @@ def test_bound_row_records_its_calibration(tiny_map):
 def test_the_command_names_a_bad_profile(capsys):
     assert regime_map.main(["--profile", "no-such-profile"]) == 2
     assert "does not exist" in capsys.readouterr().out
+
+
+def test_the_paper_profile_finds_every_regime_row_committed(monkeypatch):
+    """A reproduction of the committed paper profile trains nothing: every (training noise, model, seed)
+    of its regime map, the physics reference included, is a committed row whose key matches the
+    profile's settings (a missing or stale row would make notebook 02 train for about an hour)."""
+    from drfkit.study.params import for_notebook, load_profile
+
+    def refuse(name, seed, *args):
+        raise AssertionError(f"the regime map would train {name} seed {seed}: commit its row "
+                             f"(python -m drfkit regime --profile paper)")
+
+    monkeypatch.setattr(regime, "_model", refuse)
+    P = for_notebook("02_pendulum_dynamics", load_profile("paper"))
+    table = regime.profile_map(P)
+    assert set(table["model"]) == {*REGIME_BASES, "physics_bound"}
+    assert set(table["train_noise"]) == set(map(float, P.dynamics.regime.train_noise))
