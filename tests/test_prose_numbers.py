@@ -15,6 +15,12 @@ def _table(name):
     return pd.read_csv(TABLES / name)
 
 
+def _book(model, column):
+    """Seed mean of a book-protocol row of the paper-scale protocol table (test data)."""
+    t = _table("pendulum_protocols.csv")
+    return float(t.loc[(t["protocol"] == "book") & (t["model"] == model), column].mean())
+
+
 def _ablation(variant, column):
     t = _table("pendulum_ablation.csv")
     return float(t.loc[t["variant"] == variant, column].mean())
@@ -26,6 +32,12 @@ QUOTES = [
      lambda: float(_table("pendulum_epoch_times.csv").set_index("model").loc["drf", "ratio_to_no_dynamics"]), 2),
     ("docs/dynamics.md", r"coasts better than `book` \(blackout MAE ([0-9.]+) against",
      lambda: _ablation("book_noise1", "mae_blackout"), 3),
+    ("docs/dynamics.md", r"the DRF's MAE at 0.5 is ([0-9.]+),", lambda: _book("drf", "mae_0.5"), 4),
+    ("docs/dynamics.md", r"the DRF's MAE at 0.5 is [0-9.]+, at 0.75 is ([0-9.]+);", lambda: _book("drf", "mae_0.75"), 3),
+    ("docs/dynamics.md", r"the known-dynamics filter's\s+([0-9.]+) and", lambda: _book("known_dynamics", "mae_0.5"), 4),
+    ("docs/dynamics.md", r"the known-dynamics filter's\s+[0-9.]+ and ([0-9.]+)\)", lambda: _book("known_dynamics", "mae_0.75"), 3),
+    ("docs/dynamics.md", r"\*\*Gain on\s+blackout frames ≤ 0.25 of clean\*\*: missed \(([0-9.]+)\)",
+     lambda: _book("drf", "gain_ratio_blackout"), 2),
     ("docs/dynamics.md", r"coasts better\s+still \(([0-9.]+)\)", lambda: _ablation("book_train1", "mae_blackout"), 3),
 ]
 
