@@ -23,11 +23,11 @@ def slow_cells(results: Path, over: float = 30.0) -> str:
         if not path.is_file():
             raise SystemExit(f"{path} is missing: run `make reproduce PROFILE=<profile>` first "
                              f"(or `python -m drfkit manifest --cell-times <profile>` for cell_times.csv)")
-    pipeline = json.loads(manifest_path.read_text())["pipeline"]
+    manifest = json.loads(manifest_path.read_text())
+    pipeline, git = manifest["pipeline"], manifest["environment"].get("git", {})
     durations = pipeline["durations_s"]
     cells = pd.read_csv(cells_path)
     total = sum(durations.values())
-    git = json.loads(manifest_path.read_text())["environment"].get("git", {})
     lines = [f"commit {git.get('commit', '?')[:7]}{' (dirty)' if git.get('dirty') else ''}, "
              f"started {pipeline.get('started', '?')}, total {total:,.0f} s ({total / 60:.0f} min)", "",
              "| notebook | seconds | share | cells over %g s |" % over, "|---|---|---|---|"]
