@@ -1,13 +1,10 @@
 """tools/bench_evaluation.py, the evaluation speed-ups' benchmark docs/rerun_time.md quotes, runs."""
-import importlib.util
-
-from drfkit.util.paths import REPO_ROOT
+import pytest
 
 
-def test_evaluation_benchmark_runs_and_prints_every_row(capsys):
-    spec = importlib.util.spec_from_file_location("bench_evaluation", REPO_ROOT / "tools" / "bench_evaluation.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+@pytest.mark.slow  # the whole tool: about 4 s
+def test_evaluation_benchmark_runs_and_prints_every_row(capsys, load_tool):
+    bench = load_tool("bench_evaluation")
     assert bench.main(["--sequences", "2", "--min-run-time", "0.01"]) == 0
     out = capsys.readouterr().out
     for row in ("F.max_pool2d", "max_pool_2x2", "bernoulli_ per rate", "shared uniforms",

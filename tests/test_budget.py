@@ -2,8 +2,9 @@
 import pandas as pd
 import pytest
 
-from drfkit.book import budget, train_runs
+from drfkit.book import budget
 from drfkit.study.params import load_profile, write_profile
+from drfkit.cli import main as cli
 
 
 def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, monkeypatch):
@@ -13,7 +14,7 @@ def test_budget_covers_every_model_and_scales_with_epochs_and_seeds(tmp_path, mo
                   pend_seq_len=8, ped_n_scenes=4, ped_frames_per_scene=4, pend_epochs=3, seeds=[0, 1, 2])
     path = tmp_path / "tiny.yaml"
     write_profile(path, values)
-    assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
+    assert cli(["budget", "--profile", str(path), "--min-run-time", "0.01"]) == 0
     table = pd.read_csv(tmp_path / "tiny" / "training_budget.csv")
     assert set(zip(table["study"], table["model"])) == (
         {("pendulum", m) for m in values["pend_models"]} | {("pedestrians", m) for m in values["ped_models"]})
@@ -44,9 +45,9 @@ def test_budget_counts_the_epochs_already_in_checkpoints(tmp_path, monkeypatch):
     path = tmp_path / "tiny.yaml"
     write_profile(path, values)
     # one of the two no_dynamics seeds fully trained: 2 of 4 epochs done, half the hours left
-    assert train_runs.main(["--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
+    assert cli(["train", "--profile", str(path), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "1"]) == 0
-    assert budget.main(["--profile", str(path), "--min-run-time", "0.01"]) == 0
+    assert cli(["budget", "--profile", str(path), "--min-run-time", "0.01"]) == 0
     row = pd.read_csv(tmp_path / "tiny" / "training_budget.csv").set_index(["study", "model"])
     assert row.loc[("pendulum", "no_dynamics"), "epochs_done"] == 2
     assert row.loc[("pendulum", "no_dynamics"), "hours_left"] == pytest.approx(

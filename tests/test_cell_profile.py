@@ -7,6 +7,7 @@ import pytest
 
 from drfkit.book import cell_profile
 from drfkit.util.paths import REPO_ROOT
+from drfkit.cli import main as cli
 
 
 class FakeEvents:
@@ -64,6 +65,6 @@ def test_the_pipeline_flag_sets_the_environment_for_the_kernels(monkeypatch):
     seen = {}
     monkeypatch.setenv(cell_profile.ENV, "")  # main sets it; monkeypatch puts back what was there
     monkeypatch.setattr(pipeline, "run", lambda *a, **k: seen.setdefault("threshold", cell_profile.threshold_from_env()) and 0)
-    monkeypatch.setattr(pipeline, "_die_with_parent", lambda: None)
-    pipeline.main(["--profile", "quick", "--cell-profile", "12.5"])
+    monkeypatch.setattr(pipeline, "die_with_parent", lambda: None)
+    cli(["reproduce", "--profile", "quick", "--cell-profile", "12.5"])
     assert seen["threshold"] == 12.5

@@ -118,6 +118,7 @@ def _innovation_nll(F, Q, R, y):
     return total / ((steps - 1) * n)
 
 
+@pytest.mark.slow  # trains to convergence: about 9 s
 def test_learned_transition_approaches_the_exact_kalman_filter_on_a_linear_system():
     """A rotating 2-D latent system: the learned F, q (one basis matrix) must reach the exact
     filter's NLL and the true rotation, while a filter that ignores the dynamics (F = I) is far worse."""

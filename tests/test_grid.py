@@ -17,9 +17,10 @@ import pandas as pd
 import pytest
 import torch
 
-from drfkit.book import grid, train_runs
+from drfkit.book import grid
 from drfkit.study import studies
 from drfkit.study.params import ParameterError, load_profile, write_profile
+from drfkit.cli import main as cli
 
 slow = pytest.mark.skipif(bool(os.environ.get("DRF_SKIP_SLOW")), reason="DRF_SKIP_SLOW is set: Dask cluster tests")
 
@@ -49,7 +50,7 @@ def reference(tiny, tmp_path_factory):
     root = tmp_path_factory.mktemp("sequential")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DRF_RESULTS", str(root))
-        assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1"]) == 0
+        assert cli(["train", "--profile", str(tiny), "--study", "pendulum", "--threads", "1"]) == 0
     return root / "tiny"
 
 
@@ -141,16 +142,16 @@ def test_scheduler_argument():
 def test_without_scheduler_the_command_still_takes_exactly_one_study(tiny, capsys):
     for args in ([], ["--study", "pendulum", "pedestrians"]):
         with pytest.raises(SystemExit) as exc:
-            train_runs.main(["--profile", str(tiny), *args])
+            cli(["train", "--profile", str(tiny), *args])
         assert exc.value.code == 2
     assert "exactly one study" in capsys.readouterr().err
-    assert train_runs.main(["--profile", str(tiny), "--scheduler", "nowhere"]) == 2
+    assert cli(["train", "--profile", str(tiny), "--scheduler", "nowhere"]) == 2
 
 
 # ---------------------------------------------------------------------------- on a cluster
 @slow
 def test_local_cluster_of_two_gives_the_sequential_checkpoints(tiny, reference, results, capsys):
-    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1",
+    assert cli(["train", "--profile", str(tiny), "--study", "pendulum", "--threads", "1",
                          "--scheduler", "local:2"]) == 0
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if line.startswith("[")]
@@ -172,7 +173,7 @@ def test_a_failing_task_is_reported_and_the_others_go_on(tiny, reference, result
     Path(f"{corrupt}-last.pt").write_bytes(b"not a checkpoint")
     args = ["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]
     with exclusive_lock(locked.parent / f".{locked.name}.lock", "this test"):  # as another trainer would
-        assert train_runs.main(args) == 1
+        assert cli(["train", *args]) == 1
     captured = capsys.readouterr()
     assert f"FAILED (LockedError: checkpoint {locked} is being written by process {os.getpid()}" in captured.out
     assert "FAILED (CorruptArtefactError" in captured.out and f"{RUNS - 2} trained" in captured.out
@@ -191,7 +192,7 @@ def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny
     P = grid.study_params(load_profile(tiny), "pendulum")
     torch.set_num_threads(1)
     # one run finished, one cut short after its first epoch, both by the sequential code
-    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",
+    assert cli(["train", "--profile", str(tiny), "--study", "pendulum", "--models", "drf", "--seeds", "0",
                          "--threads", "1"]) == 0
     from drfkit.util.io import param_hash
 
@@ -202,13 +203,13 @@ def test_a_rerun_trains_only_what_is_missing_and_resumes_what_was_cut_short(tiny
     finished = Path(f"{_stem(tiny, 'drf', 0)}-best.pt")
     mtime = finished.stat().st_mtime_ns
     capsys.readouterr()
-    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
+    assert cli(["train", "--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
     out = capsys.readouterr().out
     assert f"{RUNS} runs, 1 already trained, {RUNS - 1} to train" in out
     assert "lstm seed 1: resumed at epoch 1, trained to epoch 2" in out
     assert finished.stat().st_mtime_ns == mtime  # not touched
     assert_same_checkpoints(results, reference)
-    assert train_runs.main(["--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
+    assert cli(["train", "--profile", str(tiny), "--study", "pendulum", "--threads", "1", "--scheduler", cluster]) == 0
     assert f"{RUNS} runs, {RUNS} already trained, 0 to train" in capsys.readouterr().out
 
 
@@ -220,12 +221,12 @@ def test_pipeline_trains_the_grid_before_the_notebooks_only_when_asked(tiny, ref
     calls = []
     monkeypatch.setattr(pipeline, "run", lambda *a, **k: calls.append(a) or 0)
     only = ["--only", "01_pendulum_training", "05_timing"]
-    assert pipeline.main(["--profile", str(tiny), *only]) == 0  # JOBS=1: sequential, the notebooks train
+    assert cli(["reproduce", "--profile", str(tiny), *only]) == 0  # JOBS=1: sequential, the notebooks train
     assert len(calls) == 1 and not list(results.glob("models/*.pt"))
-    assert pipeline.main(["--profile", str(tiny), *only, "--scheduler", cluster]) == 0
+    assert cli(["reproduce", "--profile", str(tiny), *only, "--scheduler", cluster]) == 0
     assert len(calls) == 2 and f"grid: {RUNS} trained" in capsys.readouterr().out
     assert_same_checkpoints(results, reference)  # threads: 0 in the profile -> one thread per run
-    assert pipeline.main(["--profile", str(tiny), "--only", "05_timing", "--jobs", "2"]) == 0  # no training notebook
+    assert cli(["reproduce", "--profile", str(tiny), "--only", "05_timing", "--jobs", "2"]) == 0  # no training notebook
     assert len(calls) == 3
 
 
@@ -238,7 +239,7 @@ def test_killing_the_client_mid_grid_and_rerunning_resumes(tmp_path, cluster, ca
                              pend_batch_size=4, pend_models=["drf", "lstm"], seeds=[0])
     env = dict(os.environ, DRF_RESULTS=str(tmp_path / "results"), OMP_NUM_THREADS="1")
     models = tmp_path / "results" / "tiny" / "models"
-    proc = subprocess.Popen([sys.executable, "-m", "drfkit.book.train_runs", "--profile", str(profile), "--study", "pendulum",
+    proc = subprocess.Popen([sys.executable, "-m", "drfkit", "train", "--profile", str(profile), "--study", "pendulum",
                              "--threads", "1", "--scheduler", "local:2"], env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
@@ -267,7 +268,7 @@ def test_killing_the_client_mid_grid_and_rerunning_resumes(tmp_path, cluster, ca
     assert cut, epochs  # killed mid-run
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("DRF_RESULTS", str(tmp_path / "results"))
-        assert train_runs.main(["--profile", str(profile), "--study", "pendulum", "--threads", "1",
+        assert cli(["train", "--profile", str(profile), "--study", "pendulum", "--threads", "1",
                              "--scheduler", cluster]) == 0
     out = capsys.readouterr().out
     assert out.count("resumed at epoch") == len(cut), out

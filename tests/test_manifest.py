@@ -115,7 +115,8 @@ def test_cell_times_describe_the_last_run_only(tmp_path, monkeypatch):
     import nbformat
     import pandas as pd
 
-    from drfkit.book.manifest import main, record_cell_times, update_manifest
+    from drfkit.book.manifest import record_cell_times, update_manifest
+    from drfkit.cli import main as cli
 
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     nb = nbformat.v4.new_notebook()
@@ -133,6 +134,6 @@ def test_cell_times_describe_the_last_run_only(tmp_path, monkeypatch):
     assert sorted(set(pd.read_csv(path)["notebook"])) == run
     pd.DataFrame([{"notebook": "04_timing", "cell": 0, "seconds": 1.0, "first_line": "x"}]).to_csv(path, index=False)
     update_manifest("p", pipeline={"notebooks": run})
-    assert main(["--cell-times", "p"]) == 0
+    assert cli(["manifest", "--cell-times", "p"]) == 0
     table = pd.read_csv(path)
     assert sorted(set(table["notebook"])) == run and table["seconds"].tolist() == [2.0, 2.0]

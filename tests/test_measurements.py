@@ -15,6 +15,7 @@ from drfkit.book.measurements import cached, fingerprint
 from drfkit.models import build_model, default_config
 from drfkit.util.paths import REPO_ROOT
 from drfkit.methods.train import SequenceData, TrainConfig
+from drfkit.cli import main as cli
 
 torch.set_num_threads(1)
 CALLS: list[tuple] = []
@@ -172,6 +173,6 @@ def test_the_pipeline_flag_sets_the_environment_for_the_kernels(monkeypatch):
         return 0
 
     monkeypatch.setattr(pipeline, "run", fake_run)
-    monkeypatch.setattr(pipeline, "_die_with_parent", lambda: None)
-    pipeline.main(["--profile", "quick", "--remeasure"])
+    monkeypatch.setattr(pipeline, "die_with_parent", lambda: None)
+    cli(["reproduce", "--profile", "quick", "--remeasure"])
     assert seen["env"] is True

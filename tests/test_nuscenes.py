@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from drfkit.data.noise import Noise
-from drfkit.data import nuscenes, nuscenes_tables
+from drfkit.data import nuscenes_tables
 from drfkit.data.nuscenes import load_nuscenes_records, write_noisy_images
 from drfkit.data.nuscenes_tables import (
     box_in_image_any,
@@ -42,6 +42,7 @@ from drfkit.study.pedestrian_runs import load_pedestrians
 from drfkit.data.sim_detector import simulate_records
 from drfkit.data.sim_world import simulate_truth
 from drfkit.data.records import RECORD_FIELDS, check_records
+from drfkit.cli import main as cli
 
 REPO = Path(__file__).resolve().parents[1]
 VERSION = "v1.0-mini"
@@ -608,7 +609,7 @@ def _changed_fraction(root: Path, out: Path, facts: dict):
 def test_noisify_cli_writes_salt_and_pepper_images(fixture, tmp_path):
     root, _, facts = fixture
     out = tmp_path / "noisy"
-    assert nuscenes.main(["noisify", "--root", str(root), "--out", str(out), "--p", "0.2",
+    assert cli(["nuscenes", "noisify", "--root", str(root), "--out", str(out), "--p", "0.2",
                           "--version", VERSION, "--seed", "3"]) == 0
     written = sorted(out.rglob("*.png"))
     assert len(written) == 5  # CAM_FRONT keyframes only (default cameras)
@@ -622,7 +623,7 @@ def test_noisify_cli_writes_salt_and_pepper_images(fixture, tmp_path):
     # The real command line, as a user would type it.
     env = {**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"}
     result = subprocess.run(
-        [sys.executable, "-m", "drfkit.data.nuscenes", "noisify", "--root", str(root), "--out",
+        [sys.executable, "-m", "drfkit", "nuscenes", "noisify", "--root", str(root), "--out",
          str(tmp_path / "cli"), "--p", "0.05", "--version", VERSION, "--cameras", "CAM_FRONT", "CAM_BACK"],
         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=60,
     )

@@ -121,7 +121,7 @@ def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
     bad["pendulum"]["epohcs"] = 3
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(bad))
-    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path)],
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "'pendulum.epohcs'" in proc.stderr and "unknown parameter" in proc.stderr and "'epochs'" in proc.stderr
@@ -131,7 +131,7 @@ def test_yaml_with_unknown_key_fails_before_any_notebook_runs(tmp_path):
 @pytest.mark.slow
 def test_yaml_with_wrong_type_names_notebook_and_key(tmp_path):
     path = write_profile(tmp_path / "bad.yaml", load_profile("quick") | {"pend_epochs": "many"})
-    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path)],
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(path)],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert "pend_epochs" in proc.stderr and "notebook 01_pendulum_training" in proc.stderr

@@ -18,7 +18,7 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     path = tmp_path / "failing.yaml"
     write_profile(path, values)
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(path),
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(path),
                            "--only", "00_data_prep", "05_timing"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 1, proc.stderr[-2000:]
@@ -48,7 +48,7 @@ def test_overrides_are_parsed_as_yaml_and_checked():
 @pytest.mark.slow
 def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", "quick", "--only",
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", "quick", "--only",
                            "04_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]

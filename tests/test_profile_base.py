@@ -55,6 +55,6 @@ def test_an_overridden_value_meets_the_notebooks_checks(tmp_path):
     (tmp_path / "mine.yaml").write_text("base: quick\npendulum:\n  epochs: many\n")
     with pytest.raises(ParameterError, match="pend_epochs"):
         notebook_params("01_pendulum_training", load_profile(tmp_path / "mine.yaml"))
-    proc = subprocess.run([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(tmp_path / "mine.yaml")],
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(tmp_path / "mine.yaml")],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "pend_epochs" in proc.stderr and "== 00_data_prep" not in proc.stdout

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow
 
 
 def _pipeline(profile, env, *extra):
-    return subprocess.Popen([sys.executable, "-m", "drfkit.book.pipeline", "--profile", str(profile), "--only",
+    return subprocess.Popen([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(profile), "--only",
                              "00_data_prep", *extra], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
 

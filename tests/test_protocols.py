@@ -12,6 +12,7 @@ import torch
 from drfkit.study import ablation, dynamics, studies
 from drfkit.study.params import load_profile, notebook_params, validate
 from drfkit.methods.protocols import FIT_THE_MEAN, PROTOCOLS, VARIANTS, protocol_spec, summarise_ablation, variant_spec
+from drfkit.cli import main as cli
 
 torch.set_num_threads(1)
 
@@ -108,7 +109,7 @@ def test_ablation_row_is_trained_once_and_reused(tmp_path):
     assert set(table["variant"]) == {"book", "no_dynamics_book"} and "mae_per_frame_blackout" not in table
     summary = summarise_ablation(table)
     assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
-    assert ablation.main(["--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
+    assert cli(["ablation", "--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
     assert table["current"].all() and summary["current"].all()
     # a row the present code would train differently (older frames, another schedule) is kept but marked
     stale = tmp_path / "tiny" / "no_dynamics_book-seed0.json"
@@ -121,7 +122,7 @@ def test_ablation_row_is_trained_once_and_reused(tmp_path):
 
 
 def test_ablation_cli_rejects_unknown_variants(capsys):
-    assert ablation.main(["--variants", "nope", "--budget", "tiny"]) == 2
+    assert cli(["ablation", "--variants", "nope", "--budget", "tiny"]) == 2
     assert "unknown variant" in capsys.readouterr().err
 
 

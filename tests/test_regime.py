@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from drfkit.book import regime_map
 from drfkit.study import ablation, regime
 from drfkit.methods.protocols import REGIME_BASES, REGIME_TRAIN_NOISE, VARIANTS, regime_variant, variant_spec
+from drfkit.cli import main as cli
 
 LEVELS = [0.0, 0.5, 1.0]
 
@@ -92,7 +92,7 @@ def test_bound_row_records_its_calibration(tiny_map):
 
 
 def test_the_command_names_a_bad_profile(capsys):
-    assert regime_map.main(["--profile", "no-such-profile"]) == 2
+    assert cli(["regime", "--profile", "no-such-profile"]) == 2
     assert "does not exist" in capsys.readouterr().out
 
 

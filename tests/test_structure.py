@@ -78,9 +78,9 @@ MAX_LINES = 500
 # -> methods.train -> models -> models.drf -> models.recursion -> core.filter)
 MAX_CHAIN = 8
 # the layers, lowest first: a module of layer L imports only from layers of rank <= L's
-LAYERS = {"util": 0, "core": 1, "data": 2, "models": 3, "methods": 4, "study": 5, "report": 6, "book": 7}
+LAYERS = {"util": 0, "core": 1, "data": 2, "models": 3, "methods": 4, "study": 5, "report": 6, "book": 7, "cli": 8}
 # outside every layer: the package's own __init__ (re-exports load_checkpoint for the notebooks'
-# users) and __main__ (the one CLI: it imports its commands with importlib, so it has no edge)
+# users) and __main__ (``python -m drfkit``: it only calls drfkit.cli)
 OUTSIDE_LAYERS = {"drfkit", "drfkit.__main__"}
 # (importer, imported): ties that were stray (a score, the ablation's training, notebook start-up)
 FORBIDDEN = [("drfkit.methods.diagnostics", "drfkit.methods.gating"), ("drfkit.report.writers", "drfkit.study.ablation"),
@@ -119,8 +119,38 @@ def test_no_module_imports_from_a_layer_above_its_own():
 
 def test_the_cli_module_and_the_package_import_as_little_as_needed():
     graph = import_graph()
-    assert graph["drfkit.__main__"] == set()  # its commands are imported when they run
+    assert graph["drfkit.__main__"] == {"drfkit.cli"}
+    assert graph["drfkit.cli"] == set()  # its commands' modules are imported when they run
     assert graph["drfkit"] == {"drfkit.methods.train"}  # load_checkpoint, re-exported
+
+
+def command_line_code(source: str) -> list[str]:
+    """What makes a module a command line: an argparse import or an ``if __name__ == "__main__"``
+    block, as 'line: what'."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import) and any(a.name == "argparse" for a in node.names) \
+                or isinstance(node, ast.ImportFrom) and node.module == "argparse":
+            found.append((node.lineno, "imports argparse"))
+        elif isinstance(node, ast.If) and "__name__" in ast.unparse(node.test) and "__main__" in ast.unparse(node.test):
+            found.append((node.lineno, "if __name__ == '__main__'"))
+    return [f"{line}: {what}" for line, what in sorted(found)]
+
+
+def test_command_line_finder_known_answer():
+    source = "import argparse\ndef f():\n    from argparse import ArgumentParser\nif __name__ == '__main__':\n    f()\n"
+    assert command_line_code(source) == ["1: imports argparse", "3: imports argparse", "4: if __name__ == '__main__'"]
+    assert command_line_code("import os\nname = __name__\n") == []
+
+
+def test_every_command_line_lives_in_drfkit_cli():
+    """One home for the command lines: argparse and ``__main__`` blocks only under drfkit/cli/ (and
+    ``python -m drfkit`` itself); the library below takes explicit arguments."""
+    outside = [f"{module_name(p)} {hit}" for p in sorted(PACKAGE.rglob("*.py"))
+               if layer_of(module_name(p)) != "cli" and module_name(p) != "drfkit.__main__"
+               for hit in command_line_code(p.read_text(encoding="utf-8"))]
+    assert not outside, "move these into drfkit/cli/: " + "; ".join(outside)
+    assert command_line_code((PACKAGE / "cli" / "__init__.py").read_text(encoding="utf-8"))  # the finder sees the home
 
 
 def test_cycle_finder_sees_a_circle_and_accepts_a_tree():
@@ -158,7 +188,11 @@ def test_chain_finder_known_answer():
 def test_longest_import_chain_does_not_grow():
     graph = import_graph()
     assert find_cycle(graph) is None
-    chain = longest_chain(graph)
+    # the library's chain: a command of drfkit.cli sits on top of it and adds one module, by design
+    library = {m: {n for n in deps if layer_of(n) != "cli"} for m, deps in graph.items()
+               if layer_of(m) != "cli" and m not in OUTSIDE_LAYERS}
+    assert len(longest_chain(graph)) <= MAX_CHAIN + 1
+    chain = longest_chain(library)
     print(f"longest import chain ({len(chain)} modules): " + " -> ".join(chain))
     assert len(chain) <= MAX_CHAIN, ("the longest import chain grew to " + str(len(chain)) + " modules: "
                                      + " -> ".join(chain))

@@ -2,9 +2,9 @@
 long profile can be spread over processes or sessions."""
 import pytest
 
-from drfkit.book import train_runs
 from drfkit.study import pedestrian_runs, studies
 from drfkit.study.params import load_profile, notebook_params, validate, write_profile
+from drfkit.cli import main as cli
 
 
 @pytest.fixture
@@ -19,7 +19,7 @@ def tiny_profile(tmp_path, monkeypatch):
 
 
 def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_profile, tmp_path):
-    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
+    assert cli(["train", "--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "1", "--threads", "1"]) == 0
     models = tmp_path / "results" / "tiny" / "models"
     names = sorted(p.name for p in models.glob("*.pt"))
@@ -48,14 +48,14 @@ def test_cli_trains_the_selected_checkpoint_that_the_notebook_then_finds(tiny_pr
     (["--seeds", "9"], "not among the profile's seeds"),
 ])
 def test_cli_rejects_what_the_notebooks_would_never_use(tiny_profile, capsys, args, message):
-    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", *args]) == 2
+    assert cli(["train", "--profile", str(tiny_profile), "--study", "pendulum", *args]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_cli_set_overrides_the_profile(tiny_profile, tmp_path):
     import torch
 
-    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
+    assert cli(["train", "--profile", str(tiny_profile), "--study", "pendulum", "--models", "no_dynamics",
                          "--seeds", "0", "--threads", "1", "--set", "pend_epochs=2"]) == 0
     (last,) = (tmp_path / "results" / "tiny" / "models").glob("pendulum-no_dynamics-seed0-*-last.pt")
     assert torch.load(last, weights_only=False)["epoch"] == 2
@@ -67,12 +67,12 @@ def test_cli_set_overrides_the_profile(tiny_profile, tmp_path):
     ("pend_patience", "KEY=VALUE"),
 ])
 def test_cli_rejects_bad_overrides(tiny_profile, capsys, item, message):
-    assert train_runs.main(["--profile", str(tiny_profile), "--study", "pendulum", "--set", item]) == 2
+    assert cli(["train", "--profile", str(tiny_profile), "--study", "pendulum", "--set", item]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_cli_rejects_unknown_profile(capsys):
-    assert train_runs.main(["--profile", "no_such_profile", "--study", "pendulum"]) == 2
+    assert cli(["train", "--profile", "no_such_profile", "--study", "pendulum"]) == 2
     assert "known profiles" in capsys.readouterr().err
 
 
@@ -128,7 +128,7 @@ def test_cli_trains_the_book_protocol_under_its_own_names_and_reports_a_held_loc
     from drfkit.util.io import exclusive_lock
 
     args = ["--profile", str(tiny_profile), "--study", "pendulum", "--models", "drf", "--seeds", "0", "--threads", "1"]
-    assert train_runs.main(args + ["--protocol", "book"]) == 0
+    assert cli(["train", *args, "--protocol", "book"]) == 0
     P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
     book, paper = studies.checkpoint_stem(P, "pendulum", "drf", 0, "book"), studies.checkpoint_stem(P, "pendulum", "drf", 0)
     assert book.with_name(book.name + "-best.pt").exists() and not paper.with_name(paper.name + "-best.pt").exists()
@@ -137,7 +137,7 @@ def test_cli_trains_the_book_protocol_under_its_own_names_and_reports_a_held_loc
 
         saved, train_module.LOCK_WAIT_S = train_module.LOCK_WAIT_S, 0.0
         try:
-            assert train_runs.main(args) == 3
+            assert cli(["train", *args]) == 3
         finally:
             train_module.LOCK_WAIT_S = saved
     err = capsys.readouterr().err

@@ -16,6 +16,7 @@ from drfkit.models.sequence import _EncodedSequenceModel
 from drfkit.study.params import write_profile
 from drfkit.study.bench import (COLUMNS, MODES, STUDIES, add_ratios, build_timing_model, example_frames,
                                 inference_benchmark, make_frame_fn)
+from drfkit.cli import main as cli
 
 TINY = dict(n_samples=3, batch_sizes=[1, 2], threads=[1], min_run_time=0.01)
 
@@ -265,7 +266,7 @@ def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
     write_profile(profile, {
         "profile": "tiny", "seeds": [0], "device": "cpu", "threads": 0, "n_samples": 2,
         "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01})
-    assert bench.main(["--profile", str(profile)]) == 0
+    assert cli(["bench", "--profile", str(profile)]) == 0
     written = pd.read_csv(tmp_path / "results" / "tiny" / "timing.csv")
     assert list(written.columns) == COLUMNS
     assert len(written) == sum(len(MODES[k]) for _, _, kinds in STUDIES.values() for k in kinds)

@@ -10,18 +10,12 @@ epochs and seeds; and writes ``results/<profile>/training_budget.csv``. It is an
 """
 from __future__ import annotations
 
-import argparse
-import sys
-
 import numpy as np
 import pandas as pd
 import torch
 
 from drfkit.study import registry, studies
-from drfkit.util.io import atomic_write_csv, torch_load_checked
-from drfkit.study.params import load_profile, notebook_params
-from drfkit.study.profile import build_profile
-from drfkit.util.paths import results_dir
+from drfkit.util.io import torch_load_checked
 from drfkit.methods.timing.training import training_step_times
 from drfkit.methods.train import run_finished
 
@@ -84,27 +78,3 @@ def training_budget(P, min_run_time: float = 1.0) -> pd.DataFrame:
                              "hours_left": hours * left / (cfg.epochs * len(P.seeds)),
                              "threads": torch.get_num_threads()})
     return pd.DataFrame(rows)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m drfkit budget", description=__doc__.splitlines()[0])
-    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
-    ap.add_argument("--min-run-time", type=float, default=1.0, help="seconds of timing per model")
-    ap.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
-    args = ap.parse_args(argv)
-    values = load_profile(args.profile)
-    keys = set().union(*(notebook_params(s.training_notebook, values) for s in registry.STUDIES.values()))
-    P = build_profile({k: values[k] for k in keys}, "python -m drfkit budget")
-    if args.threads or P.threads:
-        torch.set_num_threads(args.threads or P.threads)
-    table = training_budget(P, args.min_run_time)
-    print(table.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
-    print(f"total: {table['hours'].sum():.1f} hours of training on this machine, {table['hours_left'].sum():.1f} "
-          f"left after the epochs in results/{P.profile}/models ({torch.get_num_threads()} torch threads)")
-    path = atomic_write_csv(results_dir(P.profile) / "training_budget.csv", table)
-    print(f"wrote {path}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

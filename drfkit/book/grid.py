@@ -19,7 +19,6 @@ What a run is -- its data, configuration and checkpoint name -- comes from ``drf
 from __future__ import annotations
 
 import os
-import sys
 import time
 import uuid
 from dataclasses import dataclass
@@ -316,24 +315,4 @@ def pretrain(profile: str, overrides: dict[str, Any] | None, only: list[str] | N
     return 1 if any(isinstance(v, BaseException) for v in outcome.values()) else 0
 
 
-def main_grid(args) -> int:
-    """``python -m drfkit train ... --scheduler ...``: the parsed arguments of ``drfkit.book.train_runs.main``."""
-    from drfkit.study.params import load_profile, parse_overrides
-
-    try:
-        values = load_profile(args.profile) | parse_overrides(args.set)
-        runs = grid_runs(values, args.study, args.models or None, args.seeds or None, args.protocol)
-        threads = args.threads or study_params(values, runs[0].study if runs else "pendulum").threads or 1
-        parse_scheduler(args.scheduler, threads)
-    except ParameterError as exc:
-        print(f"parameter error: {exc}", file=sys.stderr)
-        return 2
-    outcome = run_grid(values, runs, args.scheduler, threads, out=lambda line: print(line, flush=True),
-                       write_curves=not args.models and not args.seeds)
-    failed = [r for r, v in outcome.items() if isinstance(v, BaseException)]
-    for run in failed:
-        print(f"error: {run.name}: {type(outcome[run]).__name__}: {outcome[run]}", file=sys.stderr)
-    return 1 if failed else 0
-
-
-__all__ = ["Run", "grid_runs", "run_grid", "train_run", "run_finished_on_disk", "parse_scheduler", "pretrain", "main_grid"]
+__all__ = ["Run", "grid_runs", "run_grid", "train_run", "run_finished_on_disk", "parse_scheduler", "pretrain", "study_params"]

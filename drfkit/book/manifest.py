@@ -196,32 +196,3 @@ def record_cell_times(profile: str, notebook: str, executed_notebook, run: list[
         keep &= old["notebook"].isin(run)
     table = pd.concat([old[keep], new], ignore_index=True).sort_values(["notebook", "cell"])
     atomic_write_csv(path, table[["notebook", "cell", "seconds", "first_line"]])
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m drfkit manifest --cell-times PROFILE``: rebuild ``cell_times.csv`` from the
-    executed notebooks of a profile's last pipeline run (the manifest's ``pipeline.notebooks``; the
-    pipeline writes it after each notebook), dropping every other notebook's rows."""
-    import argparse
-
-    parser = argparse.ArgumentParser(description=main.__doc__.splitlines()[0])
-    parser.add_argument("--cell-times", metavar="PROFILE", required=True)
-    args = parser.parse_args(argv)
-    from drfkit.util.paths import NOTEBOOKS_DIR
-
-    # the last pipeline's notebooks, else every notebook of the book (their sources' names)
-    run = read_manifest(args.cell_times).get("pipeline", {}).get("notebooks") \
-        or sorted(p.stem for p in NOTEBOOKS_DIR.glob("[0-9][0-9]_*.ipynb"))
-    executed = [results_dir(args.cell_times, "executed") / f"{name}.ipynb" for name in run]
-    executed = [p for p in executed if p.is_file()]
-    if not executed:
-        print(f"no executed notebooks under results/{args.cell_times}/executed/; run the pipeline first")
-        return 1
-    for path in executed:
-        record_cell_times(args.cell_times, path.stem, path, run=[p.stem for p in executed])
-    print(f"wrote results/{args.cell_times}/cell_times.csv from {len(executed)} notebooks: {', '.join(p.stem for p in executed)}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

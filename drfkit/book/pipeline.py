@@ -18,7 +18,6 @@ evaluate. The default trains inside the notebooks, one run after another.
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import os
 import signal
@@ -30,7 +29,7 @@ from pathlib import Path
 
 from drfkit.util.io import atomic_write_bytes, exclusive_lock, param_hash
 from drfkit.book.manifest import now_iso, read_manifest, record_cell_times, record_notebook, update_manifest
-from drfkit.study.params import NOTEBOOKS, ParameterError, load_profile, notebook_params, parse_overrides
+from drfkit.study.params import NOTEBOOKS, ParameterError, load_profile, notebook_params
 from drfkit.util.paths import NOTEBOOKS_DIR, PIPELINE_ENV, PIPELINE_LOCK, REPO_ROOT, results_dir
 from drfkit.util.progress import Echo
 
@@ -280,7 +279,7 @@ def _run_locked(profile, profile_name, names, per_notebook, values, overrides, k
     return 0
 
 
-def _die_with_parent() -> None:
+def die_with_parent() -> None:
     """Ask Linux to send us SIGTERM when our parent dies: ``make`` does not pass a SIGTERM it receives
     on to its children, so without this a killed ``make reproduce`` would leave the pipeline running."""
     try:
@@ -290,51 +289,3 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
     except (OSError, AttributeError):  # not Linux: Ctrl-C and a SIGTERM sent to the pipeline still work
         pass
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
-    parser.add_argument("--only", nargs="*", help="run only these notebooks (names without .ipynb)")
-    parser.add_argument("--set", nargs="*", metavar="KEY=VALUE",
-                        help="override profile parameters (YAML values); recorded in the manifest")
-    parser.add_argument("--jobs", type=int, default=1,
-                        help="N > 1: first train the training notebooks' missing runs on a Dask LocalCluster "
-                             "of N workers (drfkit.book.grid), then run the notebooks; 1 (default): sequential")
-    parser.add_argument("--scheduler", help="like --jobs, on this Dask scheduler (tcp://host:8786) or local:N")
-    parser.add_argument("--remeasure", action="store_true",
-                        help="measure the timings and compute the cached deterministic studies again "
-                             "(drfkit.book.measurements) instead of reusing them")
-    parser.add_argument("--cell-profile", type=float, metavar="SECONDS",
-                        help="run every cell under cProfile and keep the profile of each cell slower than SECONDS "
-                             "in results/<profile>/cell_profiles/ (drfkit.book.cell_profile)")
-    args = parser.parse_args(argv)
-    if args.cell_profile is not None:
-        from drfkit.book.cell_profile import ENV as CELL_PROFILE_ENV
-
-        if not args.cell_profile >= 0:
-            parser.error("--cell-profile: seconds >= 0")
-        os.environ[CELL_PROFILE_ENV] = str(args.cell_profile)  # the notebooks' kernels inherit it
-    if args.remeasure:
-        from drfkit.book.measurements import REMEASURE_ENV
-
-        os.environ[REMEASURE_ENV] = "1"  # the notebooks' kernels inherit it
-    _die_with_parent()
-    try:
-        overrides = parse_overrides(args.set)
-        if args.jobs > 1 or args.scheduler:
-            from drfkit.book.grid import pretrain
-
-            if pretrain(args.profile, overrides, args.only, args.scheduler or f"local:{args.jobs}",
-                        out=lambda line: print(line, flush=True)) != 0:
-                print("FAILED: training grid (the runs above); no notebook was run. Rerun the same command "
-                      "to train what is missing", file=sys.stderr)
-                return 1
-        return run(args.profile, args.only, overrides=overrides)
-    except ParameterError as exc:
-        print(f"parameter error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -63,17 +63,15 @@ Choices (the paper is silent), and where they differ from Monoloco's nuScenes pr
 """
 from __future__ import annotations
 
-import argparse
 import os
-import sys
 import zlib
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable
 
 import numpy as np
 
 from drfkit.data.noise import Noise, pedestrian_corruption
-from drfkit.data.nuscenes_tables import ALL_CAMERAS, DEFAULT_CAMERAS, camera_images, project_annotations, read_tables
+from drfkit.data.nuscenes_tables import DEFAULT_CAMERAS, camera_images, project_annotations, read_tables
 from drfkit.data.pifpaf import (MIN_IOU, MONOLOCO_BOX_MARGIN, enlarge_boxes, expected_prediction_file,
                                 index_prediction_files, match_boxes, prediction_file_candidates, read_predictions)
 from drfkit.data.records import check_records
@@ -220,27 +218,3 @@ def write_noisy_images(
         atomic_write_bytes(dst, buf.tobytes())
         written.append(dst)
     return written
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``python -m drfkit nuscenes noisify --root R --out O --p 0.025``."""
-    parser = argparse.ArgumentParser(prog="python -m drfkit nuscenes", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    noisify = sub.add_parser("noisify", help="write salt-and-pepper copies of the keyframe camera images")
-    noisify.add_argument("--root", required=True, help="nuScenes folder holding '<version>/' and 'samples/'")
-    noisify.add_argument("--out", required=True, help="output folder (same relative paths)")
-    noisify.add_argument("--p", type=float, required=True, help="the noise level (salt-and-pepper: probability "
-                         "that a pixel is replaced)")
-    noisify.add_argument("--kind", default="salt_and_pepper", help="the noise kind (drfkit.data.noise.NOISE_KINDS)")
-    noisify.add_argument("--seed", type=int, default=0)
-    noisify.add_argument("--version", default="v1.0-mini")
-    noisify.add_argument("--cameras", nargs="+", default=list(DEFAULT_CAMERAS), choices=ALL_CAMERAS)
-    noisify.add_argument("--format", default="png", choices=("png", "jpg"), dest="image_format")
-    args = parser.parse_args(argv)
-    written = write_noisy_images(args.root, args.out, Noise(args.kind, args.p), args.seed, args.version, args.cameras, args.image_format)
-    print(f"wrote {len(written)} noisy images ({Noise(args.kind, args.p)}) under {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

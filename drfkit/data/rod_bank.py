@@ -128,19 +128,3 @@ def verify(n_angles: int, seed: int = 0, chunk: int = 20_000) -> int:
         theta = rng.uniform(-np.pi, np.pi, min(chunk, n_angles - start))
         mismatches += int((render_exact(theta) != render_pendulum_pil(theta)).any(axis=(1, 2)).sum())
     return mismatches
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m drfkit rodbank [N]``: the bank against PIL on N random angles (default 10^6); exit 1 if any differ."""
-    import argparse
-    import time
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("n_angles", nargs="?", type=int, default=1_000_000)
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args(argv)
-    t0 = time.perf_counter()
-    bad = verify(args.n_angles, args.seed)
-    print(f"{len(rod_bank())} bank images; {args.n_angles} random angles drawn by the bank and by PIL: {bad} differ "
-          f"({time.perf_counter() - t0:.0f} s)")
-    return 1 if bad else 0

@@ -339,21 +339,3 @@ def update_readme(sections: list[tuple[str, str, bool]]) -> None:
     head, rest = text.split(README_START, 1)
     tail = rest.split(README_END, 1)[1]
     atomic_write_text(path, f"{head}{README_START}\n{body}\n{README_END}{tail}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m drfkit report --profiles paper``: regenerate the README's results section (and
-    each profile's report.md) from results/."""
-    import argparse
-
-    ap = argparse.ArgumentParser(prog="python -m drfkit report",
-                                 description="Regenerate the README's results section from results/.")
-    ap.add_argument("--profiles", nargs="+", default=["paper"])
-    args = ap.parse_args(argv)
-    update_readme([(p, "make reproduce" if p == "paper" else f"make reproduce PROFILE={p}", p == "paper")
-                   for p in args.profiles])
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -15,9 +15,7 @@ atomically to ``<out>/<budget>/<variant>-seed<k>.json`` and reused while its fin
 """
 from __future__ import annotations
 
-import argparse
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -236,44 +234,3 @@ def round2_reading(summary: pd.DataFrame) -> str:
                           if col in best["drf"] and col in best[other]]
                 lines.append(f"best DRF / best {other}: " + ", ".join(ratios) + ".")
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Train and judge protocol variants on validation data.")
-    parser.add_argument("--budget", default="small", choices=sorted(BUDGETS))
-    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), help=f"from {sorted(VARIANTS)}")
-    parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
-    parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--out", default=None, help="folder (default results/ablation)")
-    parser.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
-    parser.add_argument("--markdown", action="store_true", help="with --summary: as the markdown table docs/ quote")
-    parser.add_argument("--round", type=int, choices=sorted(ROUNDS), help="with --summary: that round's variants only")
-    args = parser.parse_args(argv)
-    if args.summary:
-        table = ablation_table(args.budget, args.out)
-        if args.round is not None and len(table):
-            table = table[table["variant"].isin(list(ROUNDS[args.round]))]
-        summary = summarise_ablation(table)
-        print(summary_markdown(summary) if args.markdown else summary.to_string(index=False))
-        return 0
-    for name in args.variants:
-        try:
-            variant_spec(name)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-    torch.set_num_threads(args.threads)
-    for name in args.variants:
-        for seed in args.seeds:
-            t0 = time.perf_counter()
-            row = run_variant(name, seed, args.budget, args.out)
-            print(f"{name} seed {seed}: mae 0.5 {row['mae_0.5']:.4f}  0.75 {row['mae_0.75']:.4f}  "
-                  f"blackout {row['mae_blackout']:.4f}  r~noise {row['r_noise_spearman']:.2f}  "
-                  f"gain pure/clean {row.get('gain_ratio_blackout', float('nan')):.2f}  "
-                  f"prior {row.get('prior_ratio', float('nan')):.2f}  ({time.perf_counter() - t0:.0f} s)",
-                  flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

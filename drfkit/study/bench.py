@@ -33,9 +33,6 @@ change the cost (no data-dependent control flow), so no training is needed to ti
 """
 from __future__ import annotations
 
-import argparse
-import math
-import sys
 from collections.abc import Mapping
 from typing import Callable
 
@@ -320,34 +317,3 @@ def device_ratios(table: pd.DataFrame) -> pd.DataFrame:
                        gpu_over_cpu_speedup=both["median_ms_per_frame_cpu"] / both["median_ms_per_frame_gpu"]
                        )[[*keys, "cpu_threads", "gpu_over_cpu_speedup"]].reset_index(drop=True)
 
-
-# ------------------------------------------------------------------------------ CLI
-def main(argv: list[str] | None = None) -> int:
-    """``python -m drfkit bench --profile quick|paper|path.yaml``: run the inference
-    benchmark with the profile's n_samples and timing_* keys, print the table and write
-    results/<profile>/timing.csv."""
-    from drfkit.util.io import atomic_write_csv
-    from drfkit.study.params import for_notebook, load_profile
-    from drfkit.util.paths import results_dir
-
-    ap = argparse.ArgumentParser(prog="python -m drfkit bench", description=main.__doc__)
-    ap.add_argument("--profile", default="quick", help="a profile name in params/ or a YAML path")
-    args = ap.parse_args(argv)
-    P = for_notebook("bench", load_profile(args.profile))
-    if P.threads:
-        torch.set_num_threads(P.threads)
-    table = inference_benchmark(P.uncertainty.n_samples, P.timing.batch_sizes, P.timing.threads,
-                                P.timing.min_run_time, P.device, seed=P.seeds[0],
-                                progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
-    fmt = lambda v: "nan" if math.isnan(v) else f"{v:.4g}"  # noqa: E731
-    print(f"devices measured: {', '.join(sorted(table['device'].astype(str).unique()))} "
-          f"(torch {torch.__version__}; CUDA {'available' if torch.cuda.is_available() else 'not available'})")
-    with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
-        print(table.to_string(index=False, float_format=fmt))
-        ratios = device_ratios(table)
-        if len(ratios):
-            print("GPU over CPU (time per frame, CPU / GPU):")
-            print(ratios.to_string(index=False, float_format=fmt))
-    path = atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
-    print(f"wrote {path}")
-    return 0

@@ -11,7 +11,7 @@ import pandas as pd
 from drfkit.study import paper
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO, monoloco_name
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, cell, fmt_interval, rows_of, seed_interval
+from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, cell, fmt_interval, seed_interval
 
 
 def improvement(by_seed: pd.DataFrame, base: str, levels) -> tuple[float, float, float]:
@@ -79,15 +79,8 @@ def c3_pedestrian_ood_gain(by_seed: pd.DataFrame, ood_levels=(0.025, 0.05),
 def judge(ood) -> Rows:
     """C3 per protocol on notebook 04's per-seed pedestrian rows, with notebook 03's input-matched Monoloco
     (``judge.OodTables``: its per-seed rows, else its seed means)."""
-    rows: Rows = []
-    for protocol, judged in ood.by_protocol():
-        if ("pedestrians", protocol) not in judged:
-            continue
-        by_seed = rows_of(ood.evals, "pedestrians", protocol)
-        if ood.matched_seeds is not None:
-            by_seed = pd.concat([by_seed, ood.matched_seeds], ignore_index=True)
-        rows.append((protocol, c3_pedestrian_ood_gain(by_seed, ood.shifted["pedestrians"], ood.matched)))
-    return rows
+    return [(protocol, c3_pedestrian_ood_gain(by_seed, ood.shifted["pedestrians"], ood.matched))
+            for protocol, by_seed in ood.pedestrian_seeds()]
 
 
 CLAIM = CLAIMS.register("C3", Claim(

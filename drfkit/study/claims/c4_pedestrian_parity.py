@@ -65,12 +65,7 @@ def judge(ood) -> Rows:
     """C4 per protocol at the profile's training level (``pedestrians.train_p``) on notebook 04's pedestrian
     summary, with notebook 03's input-matched Monoloco (``judge.OodTables``)."""
     rows: Rows = []
-    for protocol, judged in ood.by_protocol():
-        if ("pedestrians", protocol) not in judged:
-            continue
-        by_seed = rows_of(ood.evals, "pedestrians", protocol)
-        if ood.matched_seeds is not None:
-            by_seed = pd.concat([by_seed, ood.matched_seeds], ignore_index=True)
+    for protocol, by_seed in ood.pedestrian_seeds():
         mae = at_levels(rows_of(ood.summary, "pedestrians", protocol), ood.paper_noise["pedestrians"])
         if ood.matched is not None:
             mae = pd.concat([mae, ood.matched], ignore_index=True)

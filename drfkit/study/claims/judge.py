@@ -18,8 +18,9 @@ import pandas as pd
 from drfkit.study import registry
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO
 from drfkit.study.claims.table import CLAIMS, Rows, read_claims, upsert
+from drfkit.study.claims.verdicts import rows_of
 from drfkit.util.paths import results_dir, tables_dir
-from drfkit.util.registry import Registry, load_extensions
+from drfkit.util.registry import Registry
 
 
 def _read(P, name: str) -> pd.DataFrame | None:
@@ -87,6 +88,19 @@ class OodTables:
         order = dict.fromkeys(pr for s in self.studies for pr in self.protocols[s])
         return [(protocol, [(s, protocol if protocol in self.protocols[s] else "paper") for s in self.studies])
                 for protocol in order]
+
+    def pedestrian_seeds(self) -> list[tuple[str, pd.DataFrame]]:
+        """Per protocol whose models include the pedestrians' own: their per-seed rows (one per model,
+        seed, noise) with the input-matched Monoloco's when notebook 03 wrote them (what C3 and C4 read)."""
+        out = []
+        for protocol, judged in self.by_protocol():
+            if ("pedestrians", protocol) not in judged:
+                continue
+            by_seed = rows_of(self.evals, "pedestrians", protocol)
+            if self.matched_seeds is not None:
+                by_seed = pd.concat([by_seed, self.matched_seeds], ignore_index=True)
+            out.append((protocol, by_seed))
+        return out
 
 
 def ood_tables(P) -> OodTables | None:
@@ -164,30 +178,3 @@ def write(P, ids=None) -> pd.DataFrame:
         path = results_dir(P.profile) / "claims.csv"
         table = read_claims(path) if path.exists() else pd.DataFrame(columns=["id", "protocol", "verdict"])
     return table
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m drfkit claims --profile paper``: judge every claim again from the profile's tables
-    (each claim with its notebook's parameters) and rewrite claims.csv and claims.md. Claims of the
-    extension files named by ``DRFKIT_EXTENSIONS`` are judged with the book's."""
-    import argparse
-
-    from drfkit.study.params import for_notebook, load_profile
-
-    load_extensions()
-    ap = argparse.ArgumentParser(prog="python -m drfkit claims", description=main.__doc__)
-    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
-    ap.add_argument("--ids", nargs="+", default=list(CLAIMS), choices=list(CLAIMS), help="the claims to judge")
-    args = ap.parse_args(argv)
-    values = load_profile(args.profile)
-    table = None
-    for notebook in dict.fromkeys(CLAIMS[i].notebook for i in args.ids):
-        ids = [i for i in args.ids if CLAIMS[i].notebook == notebook]
-        table = write(for_notebook(notebook, values), ids)
-    for _, r in table[table["id"].isin(args.ids)].iterrows():
-        print(f"{r['id']:4s} {r['protocol']:6s} {r['verdict']}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

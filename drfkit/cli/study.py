@@ -1,0 +1,206 @@
+"""The study and report layers' commands: ``report`` (the README's results section), ``claims``
+(every verdict again from a profile's tables), ``ablation`` (protocol variants on validation
+data), ``dynamics`` (is the filter filtering), ``bench`` (the inference benchmark) and
+``simstats`` (the simulated pedestrian source's statistics)."""
+from __future__ import annotations
+
+import sys
+
+from drfkit.cli import parser
+
+
+def report(argv: list[str]) -> int:
+    """``python -m drfkit report --profiles paper``: regenerate the README's results section (and
+    each profile's report.md) from results/."""
+    from drfkit.report.writers import update_readme
+
+    ap = parser("report")
+    ap.add_argument("--profiles", nargs="+", default=["paper"])
+    args = ap.parse_args(argv)
+    update_readme([(p, "make reproduce" if p == "paper" else f"make reproduce PROFILE={p}", p == "paper")
+                   for p in args.profiles])
+    return 0
+
+
+def claims(argv: list[str]) -> int:
+    """``python -m drfkit claims --profile paper``: judge every claim again from the profile's tables
+    (each claim with its notebook's parameters) and rewrite claims.csv and claims.md. Claims of the
+    extension files named by ``DRFKIT_EXTENSIONS`` are judged with the book's."""
+    from drfkit.study.claims.judge import write
+    from drfkit.study.claims.table import CLAIMS
+    from drfkit.study.params import for_notebook, load_profile
+    from drfkit.util.registry import load_extensions
+
+    load_extensions()
+    ap = parser("claims", claims.__doc__)
+    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
+    ap.add_argument("--ids", nargs="+", default=list(CLAIMS), choices=list(CLAIMS), help="the claims to judge")
+    args = ap.parse_args(argv)
+    values = load_profile(args.profile)
+    table = None
+    for notebook in dict.fromkeys(CLAIMS[i].notebook for i in args.ids):
+        ids = [i for i in args.ids if CLAIMS[i].notebook == notebook]
+        table = write(for_notebook(notebook, values), ids)
+    for _, r in table[table["id"].isin(args.ids)].iterrows():
+        print(f"{r['id']:4s} {r['protocol']:6s} {r['verdict']}")
+    return 0
+
+
+def ablation(argv: list[str]) -> int:
+    """``python -m drfkit ablation --budget fit --variants V --seeds 0 1``: train and judge protocol
+    variants on validation data (``drfkit.study.ablation``; resumable), or with ``--summary`` print
+    the finished rows' summary."""
+    import time
+
+    import torch
+
+    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, summarise_ablation, variant_spec
+    from drfkit.study.ablation import ROUNDS, ablation_table, run_variant, summary_markdown
+
+    ap = parser("ablation", "Train and judge protocol variants on validation data.")
+    ap.add_argument("--budget", default="small", choices=sorted(ABLATION_BUDGETS))
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS), help=f"from {sorted(VARIANTS)}")
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--out", default=None, help="folder (default results/ablation)")
+    ap.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
+    ap.add_argument("--markdown", action="store_true", help="with --summary: as the markdown table docs/ quote")
+    ap.add_argument("--round", type=int, choices=sorted(ROUNDS), help="with --summary: that round's variants only")
+    args = ap.parse_args(argv)
+    if args.summary:
+        table = ablation_table(args.budget, args.out)
+        if args.round is not None and len(table):
+            table = table[table["variant"].isin(list(ROUNDS[args.round]))]
+        summary = summarise_ablation(table)
+        print(summary_markdown(summary) if args.markdown else summary.to_string(index=False))
+        return 0
+    for name in args.variants:
+        try:
+            variant_spec(name)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    torch.set_num_threads(args.threads)
+    for name in args.variants:
+        for seed in args.seeds:
+            t0 = time.perf_counter()
+            row = run_variant(name, seed, args.budget, args.out)
+            print(f"{name} seed {seed}: mae 0.5 {row['mae_0.5']:.4f}  0.75 {row['mae_0.75']:.4f}  "
+                  f"blackout {row['mae_blackout']:.4f}  r~noise {row['r_noise_spearman']:.2f}  "
+                  f"gain pure/clean {row.get('gain_ratio_blackout', float('nan')):.2f}  "
+                  f"prior {row.get('prior_ratio', float('nan')):.2f}  ({time.perf_counter() - t0:.0f} s)",
+                  flush=True)
+    return 0
+
+
+def dynamics(argv: list[str]) -> int:
+    """``python -m drfkit dynamics --profile paper --protocol book --models drf --seeds 0 [--last]``
+
+    Prints the mechanism checks (rank correlation of r with the frame's noise, gains on clean and
+    pure-noise frames, prediction ratio) and the blackout MAE of trained pendulum runs on the
+    validation split, from their selected checkpoints or (``--last``) the last epoch of a run
+    still training.
+    """
+    import pandas as pd
+
+    from drfkit.methods.protocols import PROTOCOLS
+    from drfkit.methods.train import load_checkpoint, load_latest
+    from drfkit.study import studies
+    from drfkit.study.dynamics import probe
+    from drfkit.study.params import for_command
+    from drfkit.util.device import setup
+
+    ap = parser("dynamics", "is the filter filtering: the mechanism checks of trained pendulum runs")
+    ap.add_argument("--profile", default="paper")
+    ap.add_argument("--protocol", default="paper", choices=sorted(PROTOCOLS))
+    ap.add_argument("--models", nargs="*", default=["drf"])
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0])
+    ap.add_argument("--level", type=float, default=0.75, help="max noise of the mechanism checks")
+    ap.add_argument("--split", default="val", choices=["val", "test"])
+    ap.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
+    ap.add_argument("--threads", type=int, default=1)
+    args = ap.parse_args(argv)
+    P = for_command("02_pendulum_dynamics", args.profile)
+    if P is None:
+        return 2
+    setup(args.threads, P.seeds[0], "cpu")
+    models = {}
+    for kind in args.models:
+        for seed in args.seeds:
+            stem = studies.checkpoint_stem(P, "pendulum", kind, seed, args.protocol)
+            if not (stem.parent / f"{stem.name}-best.pt").exists():
+                print(f"error: no checkpoint {stem}-best.pt; train it with python -m drfkit train --profile "
+                      f"{args.profile} --study pendulum --protocol {args.protocol} --models {kind} --seeds {seed}")
+                return 3
+            models[(kind, seed)] = load_latest(stem) if args.last else load_checkpoint(f"{stem}-best.pt")
+            print(f"{kind} seed {seed}: epoch {models[(kind, seed)].checkpoint_meta.get('epoch')}")
+    with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
+        print(probe(P, models, args.level, args.split).to_string(index=False))
+    return 0
+
+
+def bench(argv: list[str]) -> int:
+    """``python -m drfkit bench --profile quick|paper|path.yaml``: run the inference benchmark with
+    the profile's n_samples and timing_* keys, print the table and write
+    results/<profile>/timing.csv."""
+    import math
+
+    import pandas as pd
+    import torch
+
+    from drfkit.study.bench import device_ratios, inference_benchmark
+    from drfkit.study.params import for_notebook, load_profile
+    from drfkit.util.io import atomic_write_csv
+    from drfkit.util.paths import results_dir
+
+    ap = parser("bench", bench.__doc__)
+    ap.add_argument("--profile", default="quick", help="a profile name in params/ or a YAML path")
+    args = ap.parse_args(argv)
+    P = for_notebook("bench", load_profile(args.profile))
+    if P.threads:
+        torch.set_num_threads(P.threads)
+    table = inference_benchmark(P.uncertainty.n_samples, P.timing.batch_sizes, P.timing.threads,
+                                P.timing.min_run_time, P.device, seed=P.seeds[0],
+                                progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
+    fmt = lambda v: "nan" if math.isnan(v) else f"{v:.4g}"  # noqa: E731
+    print(f"devices measured: {', '.join(sorted(table['device'].astype(str).unique()))} "
+          f"(torch {torch.__version__}; CUDA {'available' if torch.cuda.is_available() else 'not available'})")
+    with pd.option_context("display.width", 200, "display.max_rows", None, "display.max_columns", None):
+        print(table.to_string(index=False, float_format=fmt))
+        ratios = device_ratios(table)
+        if len(ratios):
+            print("GPU over CPU (time per frame, CPU / GPU):")
+            print(ratios.to_string(index=False, float_format=fmt))
+    path = atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
+    print(f"wrote {path}")
+    return 0
+
+
+def simstats(argv: list[str]) -> int:
+    """``python -m drfkit simstats --profile paper``: the simulator's statistics at the profile's
+    evaluation noise levels (markdown tables on stdout)."""
+    from drfkit.data.sim_stats import body_span_m, dataset_size, error_autocorrelation, simulator_table
+    from drfkit.study.params import for_notebook, load_profile
+    from drfkit.study.sim_stats import simulate_profile
+
+    ap = parser("simstats")
+    ap.add_argument("--profile", default="paper")
+    args = ap.parse_args(argv)
+    P = for_notebook("simstats", load_profile(args.profile))
+    truth, records = simulate_profile(P)
+    print(f"profile {args.profile}: {P.pedestrians.n_scenes} scenes x {P.pedestrians.frames_per_scene} keyframes, seed "
+          f"{P.pedestrians.data_seed}; body span of the pinhole estimate {body_span_m(truth):.3f} m\n")
+    for p, rec in records.items():
+        print(f"p = {p:g}: " + ", ".join(f"{k} {v}" for k, v in dataset_size(truth, rec).items()))
+    print()
+    table = simulator_table(truth, records)
+    cols = ["p", "bin", "n_true", "miss_rate", "height_px", "kp_miss_rate", "err_px_median", "err_rel_median",
+            "gross_rate", "conf_mean", "pinhole_mae_m", "pinhole_bias_m"]
+    print(table[cols].to_markdown(index=False, floatfmt=".3f"))
+    print()
+    for p, rec in records.items():
+        ac = error_autocorrelation(truth, rec)
+        print(f"p = {p:g}, lag 1 keyframe: keypoint error correlation {ac['keypoint']:+.4f} "
+              f"({ac['n_keypoint_pairs']} keypoint pairs), pinhole relative depth error correlation "
+              f"{ac['pinhole_rel']:+.3f} ({ac['n_pairs']} detection pairs)")
+    return 0
