@@ -152,6 +152,18 @@ def test_c7a_gain_test_at_zero():
     assert claims.c7_gating(empty, "pendulum")["verdict"] == claims.NOT_TESTABLE
 
 
+def test_c7a_is_not_testable_where_even_an_oracle_gate_gains_nothing():
+    """A model whose dropout does not change its intervals (no dropout head) gives every gate random's
+    PICP: KG - random is 0 and so is the oracle's room; that tests nothing, it does not refute the claim."""
+    c7 = lambda gains, room: claims.c7_gating(sweep("pendulum", gains, room), "pendulum",  # noqa: E731
+                                              settings("pendulum"))
+    row = c7([0.0, 0.0, 0.0], room=0.0)
+    assert row["verdict"] == claims.NOT_TESTABLE and "no gate could be told from random" in row["ours"]
+    assert c7([0.010, 0.011, 0.012], room=0.01)["verdict"] == claims.NOT_TESTABLE  # the band's edge: 1 point
+    assert c7([0.010, 0.011, 0.012], room=0.0101)["verdict"] == claims.REPRODUCED
+    assert c7([-0.01, 0.0, 0.01], room=0.02)["verdict"] == claims.NOT  # room to gain, and no gain: refuted
+
+
 def test_c7a_time_test_applies_from_half_the_cost():
     gains = [0.010, 0.011, 0.012]
     at = lambda t0: claims.c7_gating(sweep("pendulum", gains, times=(t0, 10.0)), "pendulum",  # noqa: E731

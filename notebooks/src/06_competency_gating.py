@@ -227,8 +227,9 @@ plt.show()
 # only where MC dropout is at least half of the per-frame cost (the paper's: 91 %, 2.48 of 28.23 ms).
 # Where it is less, even gating no frame cannot save a quarter of always-dropout's time, and the row
 # says "not applicable on this machine" with the measured share. **C7b** (pedestrians): the interval
-# within ±1 point (no clear gain, as the paper found); not testable when even the oracle beats random
-# by at most 1 point (then no gate could be told from random). The gates tuned on validation — at the
+# within ±1 point (no clear gain, as the paper found). Either claim is not testable when even the
+# oracle beats random by at most 1 point: then no gate could be told from random (as for a DRF without
+# a dropout head, whose intervals dropout does not change). The gates tuned on validation — at the
 # test noise (above) and at the training noise (below, the same study timed the same way) — are
 # reported in each row as references, not judged.
 

@@ -3,13 +3,15 @@
 tuned; the gates tuned on validation are a labelled reference in the row)."""
 from __future__ import annotations
 
+import math
+
 import pandas as pd
 
-from drfkit.study.claims.efficiency import (C7_MIN_SAMPLING_SHARE, C7_NEAR_ALWAYS, C7_TIME_RATIO, GATING_CLAIMS,
-                                            GATING_EVIDENCE, SWEEP_WORDS, GatingClaim, Interval, judge_gating_claim,
-                                            paper_share, sampling_share, time_test)
+from drfkit.study.claims.efficiency import (C7_MIN_SAMPLING_SHARE, C7_NEAR_ALWAYS, C7_NO_GAIN_BAND, C7_TIME_RATIO,
+                                            GATING_CLAIMS, GATING_EVIDENCE, SWEEP_WORDS, GatingClaim, Interval,
+                                            judge_gating_claim, paper_share, sampling_share, time_test)
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED
+from drfkit.study.claims.verdicts import NOT, NOT_TESTABLE, PARTLY, REPRODUCED, at_most
 
 
 def quote(g: dict) -> str:
@@ -23,7 +25,12 @@ def quote(g: dict) -> str:
 
 def verdict(sweep: pd.DataFrame, study: str, settings: pd.DataFrame | None, gain: Interval, room: Interval,
             ours: str, reference: str) -> tuple[str, str]:
-    """C7a's verdict and 'ours': KG - random above 0, and the time test where MC dropout dominates the cost."""
+    """C7a's verdict and 'ours': KG - random above 0, and the time test where MC dropout dominates the cost;
+    not testable when even an oracle gate gains at most ``C7_NO_GAIN_BAND`` over random (a model whose
+    dropout does not change its intervals, as one without a dropout head: every gate is then random)."""
+    if not math.isnan(room[0]) and at_most(room[0], C7_NO_GAIN_BAND):
+        return NOT_TESTABLE, (f"{ours}; even a perfect gate is within {100 * C7_NO_GAIN_BAND:g} point of random "
+                              f"here: no gate could be told from random{reference}")
     time_note, time_ok = "time test not measured (no settings table)", None
     if settings is not None:
         share = sampling_share(settings, study)
@@ -49,7 +56,9 @@ GATING = GATING_CLAIMS.register("C7a", GatingClaim(
     "reproduced: the interval of KG - random is above 0 and the time test passes or is not "
     "applicable (then the verdict is on coverage alone, and says so); partly: KG - random above "
     "0 in the seed mean only, or the time test fails; else not reproduced; not testable "
-    "without sweep rows", verdict))
+    "without sweep rows, or when an oracle gate (the frames of largest true error, same count) beats "
+    f"random by at most {100 * C7_NO_GAIN_BAND:g} point (as for a model whose dropout does not change its "
+    "intervals)", verdict))
 
 
 def judge(gating) -> Rows:
