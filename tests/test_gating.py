@@ -190,6 +190,38 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
     assert (out["table"]["picp"] == 0).all() and set(out["table"]["seed"]) == {0}
 
 
+def test_the_study_without_its_sweep_keeps_the_settings_metrics_and_times_only_them(monkeypatch):
+    """sweep=False (the gate tuned at the training noise, whose sweep nothing reads): the same four
+    settings with the same metrics as with the sweep, an empty sweep, and no sweep threshold timed."""
+    import pandas as pd
+
+    from drfkit.study import studies
+
+    val, test = keypoint_data(seed=11), keypoint_data(seed=12)
+    monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise=None, protocol="paper":
+                        val if split == "val" else test)
+    timed = []
+    real_measure = clock.measure_interleaved
+
+    def counting(fns, *args, **kwargs):
+        timed.append(set(fns))
+        return real_measure(fns, *args, **kwargs)
+
+    monkeypatch.setattr("drfkit.methods.gate_evaluation.measure_interleaved", counting)
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
+                           gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95), "a test")
+    models = {("drf", 0): tiny_drf()}
+    full = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001)
+    n_full = len(timed[0])
+    timed.clear()
+    alone = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001, sweep=False)
+    assert len(full["sweep"]) > 0 and alone["sweep"].empty
+    assert list(alone["sweep"].columns[:4]) == ["study", "seed", "noise", "val_noise"]
+    metrics = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae"]
+    pd.testing.assert_frame_equal(alone["table"][metrics], full["table"][metrics])
+    assert timed[0] == {"no_dropout", "always", "kalman_gain", "random"} and n_full > len(timed[0])
+
+
 # --------------------------------------------------------------------------- gated inference
 def layout_free_dropout(h, n_samples, p, uniforms=None):
     """A dropout mask that depends only on a value and the sample index, not on where the
