@@ -186,3 +186,17 @@ def test_the_book_protocol_trains_with_its_recipe_on_fresh_noise(tiny_profile, m
     assert studies.fresh_training(P, "pedestrians", "book") is None
     assert studies.study_data_key(P, "pendulum", "book")["fresh_noise"] is True
     assert "fresh_noise" not in studies.study_data_key(P, "pendulum")
+
+
+@pytest.mark.slow  # trains a DRF, then the probe's passes: about 5 s
+def test_dynamics_probes_a_trained_drf_and_names_the_command_for_a_missing_one(tiny_profile, tmp_path, capsys):
+    path = tmp_path / "tiny10.yaml"  # the blackout needs 10 frames
+    write_profile(path, load_profile(tiny_profile) | {"profile": "tiny10", "pend_seq_len": 10})
+    args = ["--profile", str(path), "--models", "drf", "--seeds", "0", "--threads", "1"]
+    assert cli(["dynamics", *args]) == 3
+    assert "python -m drfkit train --profile" in capsys.readouterr().out
+    assert cli(["train", *args, "--study", "pendulum"]) == 0
+    capsys.readouterr()
+    assert cli(["dynamics", *args, "--level", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "drf seed 0: epoch 1" in out and "r_noise_spearman" in out and "gain_ratio" in out, out

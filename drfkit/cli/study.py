@@ -16,9 +16,10 @@ def report(argv: list[str]) -> int:
 
     ap = parser("report")
     ap.add_argument("--profiles", nargs="+", default=["paper"])
+    ap.add_argument("--readme", help="the README whose results section is rewritten (default: the repository's)")
     args = ap.parse_args(argv)
     update_readme([(p, "make reproduce" if p == "paper" else f"make reproduce PROFILE={p}", p == "paper")
-                   for p in args.profiles])
+                   for p in args.profiles], args.readme)
     return 0
 
 

@@ -322,19 +322,20 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     return "\n".join(lines)
 
 
-def update_readme(sections: list[tuple[str, str, bool]]) -> None:
-    """Replace the README text between the results markers by the sections of
-    (profile, command, link_figures)."""
+def update_readme(sections: list[tuple[str, str, bool]], readme: Path | None = None) -> None:
+    """Replace the text between the results markers of ``readme`` (default: the repository's
+    README.md) by the sections of (profile, command, link_figures), and write each profile's
+    report.md beside its claims.md."""
     from drfkit.util.io import atomic_write_text
-    from drfkit.util.paths import REPO_ROOT
+    from drfkit.util.paths import REPO_ROOT, results_dir
 
-    path = REPO_ROOT / "README.md"
+    path = Path(readme) if readme is not None else REPO_ROOT / "README.md"
     text = path.read_text()
     if README_START not in text or README_END not in text:
-        raise ValueError(f"README.md lacks the markers {README_START} ... {README_END}")
+        raise ValueError(f"{path} lacks the markers {README_START} ... {README_END}")
     body = "\n".join(readme_section(profile, command) for profile, command, _ in sections)
     for profile, command, _ in sections:
-        if (REPO_ROOT / "results" / profile / "claims.md").exists():
+        if (results_dir(profile) / "claims.md").exists():
             write_report(profile, command)
     head, rest = text.split(README_START, 1)
     tail = rest.split(README_END, 1)[1]
