@@ -32,11 +32,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def parser(command: str, description: str | None = None) -> argparse.ArgumentParser:
+def parser(command: str, description: str | None = None, profile: str | None = None) -> argparse.ArgumentParser:
     """The parser of one command: its usage line says ``python -m drfkit <command>``, its
-    description is the command's one line of help unless ``description`` is given."""
-    return argparse.ArgumentParser(prog=f"python -m drfkit {command}",
-                                   description=description or COMMANDS[command][1])
+    description is the command's one line of help unless ``description`` is given; with
+    ``profile``, a ``--profile`` option of that default (every command reads a profile the same way)."""
+    ap = argparse.ArgumentParser(prog=f"python -m drfkit {command}", description=description or COMMANDS[command][1])
+    if profile is not None:
+        ap.add_argument("--profile", default=profile, help=f"a profile name in params/ or a YAML path (default {profile})")
+    return ap
 
 
 def command(name: str) -> Callable[[list[str]], int]:

@@ -17,8 +17,7 @@ def reproduce(argv: list[str]) -> int:
     into results/<profile>/executed/ (``drfkit.book.pipeline.run``)."""
     from drfkit.book import pipeline
 
-    ap = parser("reproduce")
-    ap.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
+    ap = parser("reproduce", profile="paper")
     ap.add_argument("--only", nargs="*", help="run only these notebooks (names without .ipynb)")
     ap.add_argument("--set", nargs="*", metavar="KEY=VALUE",
                     help="override profile parameters (YAML values); recorded in the manifest")
@@ -77,8 +76,7 @@ def train(argv: list[str]) -> int:
     from drfkit.util.device import setup
     from drfkit.util.io import CorruptArtefactError, LockedError
 
-    ap = parser("train", train.__doc__.strip().splitlines()[0])
-    ap.add_argument("--profile", default="paper", help="name in params/ or a path to a YAML file")
+    ap = parser("train", train.__doc__.strip().splitlines()[0], profile="paper")
     ap.add_argument("--study", nargs="+", choices=sorted(STUDIES),
                     help="the study to train (one; with --scheduler any number, default all)")
     ap.add_argument("--models", nargs="*", help="model kinds (default: the profile's)")
@@ -160,8 +158,7 @@ def budget(argv: list[str]) -> int:
     from drfkit.util.io import atomic_write_csv
     from drfkit.util.paths import results_dir
 
-    ap = parser("budget")
-    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
+    ap = parser("budget", profile="paper")
     ap.add_argument("--min-run-time", type=float, default=1.0, help="seconds of timing per model")
     ap.add_argument("--threads", type=int, help="torch threads (default: the profile's)")
     args = ap.parse_args(argv)
@@ -216,8 +213,7 @@ def regime(argv: list[str]) -> int:
     from drfkit.study.params import for_command
     from drfkit.study.regime import profile_map
 
-    ap = parser("regime")
-    ap.add_argument("--profile", default="paper")
+    ap = parser("regime", profile="paper")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
     P = for_command("02_pendulum_dynamics", args.profile)

@@ -33,8 +33,7 @@ def claims(argv: list[str]) -> int:
     from drfkit.util.registry import load_extensions
 
     load_extensions()
-    ap = parser("claims", claims.__doc__)
-    ap.add_argument("--profile", default="paper", help="a profile name in params/ or a YAML path")
+    ap = parser("claims", claims.__doc__, profile="paper")
     ap.add_argument("--ids", nargs="+", default=list(CLAIMS), choices=list(CLAIMS), help="the claims to judge")
     args = ap.parse_args(argv)
     values = load_profile(args.profile)
@@ -111,8 +110,7 @@ def dynamics(argv: list[str]) -> int:
     from drfkit.study.params import for_command
     from drfkit.util.device import setup
 
-    ap = parser("dynamics", "is the filter filtering: the mechanism checks of trained pendulum runs")
-    ap.add_argument("--profile", default="paper")
+    ap = parser("dynamics", profile="paper")
     ap.add_argument("--protocol", default="paper", choices=sorted(PROTOCOLS))
     ap.add_argument("--models", nargs="*", default=["drf"])
     ap.add_argument("--seeds", nargs="*", type=int, default=[0])
@@ -154,8 +152,7 @@ def bench(argv: list[str]) -> int:
     from drfkit.util.io import atomic_write_csv
     from drfkit.util.paths import results_dir
 
-    ap = parser("bench", bench.__doc__)
-    ap.add_argument("--profile", default="quick", help="a profile name in params/ or a YAML path")
+    ap = parser("bench", bench.__doc__, profile="quick")
     args = ap.parse_args(argv)
     P = for_notebook("bench", load_profile(args.profile))
     if P.threads:
@@ -184,8 +181,7 @@ def simstats(argv: list[str]) -> int:
     from drfkit.study.params import for_notebook, load_profile
     from drfkit.study.sim_stats import simulate_profile
 
-    ap = parser("simstats")
-    ap.add_argument("--profile", default="paper")
+    ap = parser("simstats", profile="paper")
     args = ap.parse_args(argv)
     P = for_notebook("simstats", load_profile(args.profile))
     truth, records = simulate_profile(P)
