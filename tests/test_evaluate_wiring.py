@@ -33,7 +33,7 @@ def test_metrics_of_a_stub_prediction_use_the_total_sigma_and_the_mask(monkeypat
     targets = torch.tensor([[[0.1], [1.5], [2.0]], [[0.0], [-1.2], [100.0]]])
     mask = torch.tensor([[True, True, True], [True, True, False]])
     pred = unc.Prediction(mean=mean, aleatoric=aleatoric, epistemic=epistemic, total=total, n_samples=8,
-                          dropout_p=0.1)
+                          dropout_p=0.1, point=mean)
     monkeypatch.setattr(unc, "predict_rates", lambda *a, **k: [pred])
     data = SequenceData(torch.zeros(2, 3, 17, 3), targets, mask)
     (m,) = evaluate_model_rates(None, data, n_samples=8, dropout_rates=[0.1])
@@ -63,7 +63,7 @@ def _stub_study(monkeypatch, tmp_path):
     targets = torch.tensor([[[0.1], [1.5], [2.0]], [[0.0], [-1.2], [100.0]]])
     mask = torch.tensor([[True, True, True], [True, True, False]])
     pred = unc.Prediction(mean=mean, aleatoric=torch.full_like(mean, 0.3), epistemic=torch.full_like(mean, 0.4),
-                          total=torch.full_like(mean, 0.5), n_samples=8, dropout_p=0.1)
+                          total=torch.full_like(mean, 0.5), n_samples=8, dropout_p=0.1, point=mean)
     monkeypatch.setattr(ev, "cached_predict_rates", lambda *a, **k: [pred] * len(k["dropout_rates"]))
     monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise: SequenceData(
         torch.zeros(2, 3, 17, 3), targets, mask))

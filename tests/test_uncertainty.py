@@ -178,7 +178,7 @@ def test_dropout_rate_controls_the_spread():
 def test_intervals_are_95_percent_gaussian():
     pred = Prediction(mean=torch.tensor([[[1.0]]]), aleatoric=torch.tensor([[[0.6]]]),
                       epistemic=torch.tensor([[[0.8]]]), total=torch.tensor([[[1.0]]]),
-                      n_samples=2, dropout_p=0.1)
+                      n_samples=2, dropout_p=0.1, point=torch.tensor([[[1.0]]]))
     lower, upper = intervals(pred)
     assert lower.item() == pytest.approx(1.0 - 1.959964, abs=1e-5)
     assert upper.item() == pytest.approx(1.0 + 1.959964, abs=1e-5)

@@ -275,19 +275,24 @@ def t975(df: int) -> float:
     return _T975[key]
 
 
-def prediction_metrics(mean, total_sigma, targets, mask=None, level: float = 0.95) -> dict[str, float]:
-    """All metrics of Gaussian predictions N(mean, total_sigma^2) against ``targets``.
+def prediction_metrics(mean, total_sigma, targets, mask=None, level: float = 0.95, point=None) -> dict[str, float]:
+    """All metrics of Gaussian predictions N(mean, total_sigma^2) against ``targets``; the MAE of
+    ``point`` (the dropout-off estimate, ``drfkit.methods.uncertainty.Prediction.point``) where given,
+    else of ``mean``: point metrics read the point estimate, interval metrics the predictive Gaussian.
 
-    mean, total_sigma, targets: (N, T, out); mask: (N, T) bool or None (broadcast over out).
+    mean, total_sigma, targets, point: (N, T, out); mask: (N, T) bool or None (broadcast over out).
     """
     mean, sigma, y = (np.asarray(torch.as_tensor(a).detach().cpu(), dtype=np.float64)
                       for a in (mean, total_sigma, targets))
+    point = mean if point is None else np.asarray(torch.as_tensor(point).detach().cpu(), dtype=np.float64)
+    if point.shape != mean.shape:
+        raise ValueError(f"point must have the mean's shape {mean.shape}, got {point.shape}")
     m = None
     if mask is not None:
         m = np.broadcast_to(np.asarray(torch.as_tensor(mask).cpu(), dtype=bool)[..., None], y.shape)
     lower, upper = gaussian_interval(mean, sigma, level)
     return {
-        "mae": mae(y, mean, mask=m),
+        "mae": mae(y, point, mask=m),
         "picp": picp(y, lower, upper, mask=m),
         "mpiw": mpiw(lower, upper, mask=m),
         "nll": gaussian_nll(y, mean, sigma, mask=m),

@@ -23,8 +23,10 @@ from drfkit.methods.uncertainty import as_model_input
 from drfkit.models.parts import check_dropout_p, check_n_samples
 
 
-def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: float) -> dict[str, float]:
-    m = prediction_metrics(pred.mean, pred.total, y, real, level)
+def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: float,
+             point: torch.Tensor) -> dict[str, float]:
+    """Interval metrics of ``pred``, the MAE of ``point`` (the dropout-off pass: a setting changes the intervals only)."""
+    m = prediction_metrics(pred.mean, pred.total, y, real, level, point=point)
     return {k: m[k] for k in ("picp", "mpiw", "nll", "mae")}
 
 
@@ -95,7 +97,7 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
             variants[name] = (setting, extra)
             rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
                                                                   else ALWAYS),
-                         "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level)})
+                         "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
             return pred
 
         evaluate("no_dropout", "no_dropout", {})
@@ -113,7 +115,7 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
             if name != "kalman_gain":
                 pred = assemble(passes["no_dropout"], passes["always"], oracle_selection(abs_error, real, n_sel))
                 rows.append({"setting": f"oracle:{name}", "threshold": thr, "n_selected": n_sel,
-                             **_metrics(pred, y, real, level)})
+                             **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
 
         # ---- times, on the timed subset only
         idx = timing_subset(real.sum(dim=1), timing_frames).to(device)

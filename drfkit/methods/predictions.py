@@ -31,8 +31,9 @@ from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
 
 # 2: the masks are drawn as uniforms shared by the rates, per head chunk (uncertainty.predict_rates); a
 # prediction stored by format 1 holds other (equally valid) draws and is computed again
-FORMAT = 2
-FIELDS = ("mean", "aleatoric", "epistemic", "total")
+# 3: the dropout-off point estimate is stored beside the MC moments
+FORMAT = 3
+FIELDS = ("mean", "aleatoric", "epistemic", "total", "point")
 
 
 def weights_sha256(model) -> str:

@@ -7,6 +7,8 @@ ONCE per input chunk; the S Monte Carlo samples only go through the stochastic p
 That is what makes the DRF's uncertainty cheap: its dropout sits in the small decoder.
 
 For S samples with means m_s and sigmas sigma_s (per frame and output):
+    point      = the head's dropout-off mean: the point estimate every MAE and ordering reads
+                 (the MC mean carries the noise of S draws; checkpoints are selected dropout-off too)
     mean       = mean_s m_s
     aleatoric  = sqrt(mean_s sigma_s^2)       the average predicted noise
     epistemic  = std_s m_s (population std)   the spread of the dropout passes
@@ -34,7 +36,8 @@ HEAD_CHUNK_FRAMES = 600
 @dataclass(frozen=True)
 class Prediction:
     """CPU float32 tensors, each (B, T, out); gains (B, T, n, n) when asked for and the
-    model has a filter, else None."""
+    model has a filter, else None. ``point`` is the dropout-off mean (point metrics), ``mean`` and
+    ``total`` the MC mixture's moments (interval metrics); with n_samples = 0 they coincide."""
 
     mean: torch.Tensor
     aleatoric: torch.Tensor
@@ -42,6 +45,7 @@ class Prediction:
     total: torch.Tensor
     n_samples: int
     dropout_p: float
+    point: torch.Tensor
     gains: torch.Tensor | None = None
 
 
@@ -137,14 +141,14 @@ def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), bat
             # the heads in sub-chunks whose S samples stay in cache (2x faster than one pass on 256 sequences)
             for h in h_chunk.split(max(1, HEAD_CHUNK_FRAMES // h_chunk.shape[1])):
                 uniforms = SharedUniforms()  # one draw of the masks' uniforms, for every rate
+                point, sigma = model.head(h)  # dropout off (eval mode): the point estimate, at every rate
                 for i, p in enumerate(rates):
                     if n_samples == 0:
-                        mean, sigma = model.head(h)
-                        summary = (mean, sigma, torch.zeros_like(mean), sigma)
+                        summary = (point, sigma, torch.zeros_like(point), sigma)
                     else:
                         summary = summarise_samples(*model.head(h, n_samples=n_samples, dropout_p=p,
                                                                 uniforms=uniforms))
-                    parts[i].append(tuple(t.float().cpu() for t in summary))
+                    parts[i].append(tuple(t.float().cpu() for t in (*summary, point)))
             if g is not None:
                 gains.append(g.float().cpu())
     finally:
@@ -152,9 +156,9 @@ def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), bat
     all_gains = torch.cat(gains, dim=0) if gains else None
     out = []
     for p, chunks in zip(rates, parts):
-        mean, aleatoric, epistemic, total = (torch.cat(ts, dim=0) for ts in zip(*chunks))
+        mean, aleatoric, epistemic, total, point = (torch.cat(ts, dim=0) for ts in zip(*chunks))
         out.append(Prediction(mean=mean, aleatoric=aleatoric, epistemic=epistemic, total=total,
-                              n_samples=n_samples, dropout_p=p if n_samples else 0.0, gains=all_gains))
+                              n_samples=n_samples, dropout_p=p if n_samples else 0.0, point=point, gains=all_gains))
     return out
 
 

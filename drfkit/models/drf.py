@@ -54,7 +54,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
     kind = "drf"
     spec = ModelSpec("DRF (ours)", "tab:blue", studies=("pendulum", "pedestrians"),
                      bench_modes=("batched", "sequential", "naive", "no_sampling"),
-                     protocols={"paper": "paper", "book": "fit_physical_book_wide"})
+                     protocols={"paper": "paper", "book": "fit_paper_wide"})
     stream_follows = ("features", "run_filter", "filter_steps")
     #: its gains K_t (B, T, n, n) act on the latent state: mean diag K_t scores competency (gating)
     competency_gain = True
@@ -147,14 +147,16 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         return list(self.transition.parameters())
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
-                     return_transition: bool = False, return_prior: bool = False) -> dict[str, torch.Tensor]:
+                     return_transition: bool = False, return_prior: bool = False,
+                     q_scale: float = 1.0) -> dict[str, torch.Tensor]:
         """The per-step filter loop on w, r (B, T, n), recording what was asked.
 
         Always: 'z', 'p_diag' (B, T, n). ``return_gains``: 'gains' K (B, T, n, n), I at t = 0.
         ``return_transition``: 'F' (B, T-1, n, n), F_t for t = 1..T-1; 'q' (B, T-1, n); 'z_prior'
         (B, T-1, n) = F_t z_{t-1}, the prediction of z_t before w_t is seen.
         ``return_prior``: 'z_prior' and 'p_prior' (B, T-1, n) = diag(F_t P_{t-1} F_t^T) + q_t, the
-        prior's variances.
+        prior's variances. ``q_scale`` multiplies every q_t (an intervention of the dissection,
+        ``drfkit.methods.dissection``; 1 is the model).
         """
         batch, steps, n = w.shape
         # unbind once: indexing w[:, t] in the loop would make the backward pass build
@@ -168,6 +170,8 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         state = self.transition.initial_state(batch, w)
         for t in range(1, steps):
             F_t, q_t, state = self.transition(z, state)
+            if q_scale != 1.0:
+                q_t = q_t * q_scale
             if return_transition:
                 Fs.append(F_t), qs.append(q_t)
             if return_transition or return_prior:
@@ -218,6 +222,37 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                 "static_err": (z[:, :-1] - w[:, 1:])[..., :k].norm(dim=-1),
                 "spectral_radius": torch.linalg.eigvals(sample).abs().amax(-1) if len(sample) else sample.new_empty(0),
                 "h": mean_and_log_variance(z, tr["p_diag"])}
+
+    @property
+    def observed_dims(self) -> int:
+        """k: the latent dims that frames observe (the first k; the memory dims after them are not)."""
+        return self.latent - self.memory_dims
+
+    def observed_truth(self, w_clean: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """What the observed block (B, T, k) should hold on a frame: the targets where the state is in the
+        output's units (``readout='identity'``), else the encoder's observation of the noiseless frame
+        ``w_clean`` (B, T, n) -- a latent has no truth of its own, the clean frame's code is the best it has."""
+        k = self.observed_dims
+        return targets[..., :k] if self.readout == "identity" else w_clean[..., :k]
+
+    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
+        """The filter on w, r (B, T, n) with every q_t times ``q_scale``, seen on the observed block k
+        (``drfkit.methods.dissection``):
+        'prior' (B, T-1, k) F_t z_{t-1}, 'p_prior' (B, T-1, k) its variances diag(F P F^T) + q_t, 'q' (B, T-1, k),
+        'gain' (B, T, k) diag K_t (1 at t = 0) and 'h' (B, T, 2n) the belief the decoder reads."""
+        k = self.observed_dims
+        tr = self.filter_steps(w, r, return_gains=True, return_transition=True, return_prior=True, q_scale=q_scale)
+        return {"prior": tr["z_prior"][..., :k], "p_prior": tr["p_prior"][..., :k], "q": tr["q"][..., :k],
+                "gain": tr["gains"].diagonal(dim1=-2, dim2=-1)[..., :k],
+                "h": mean_and_log_variance(tr["z"], tr["p_diag"])}
+
+    def hold_belief_variance(self, h: torch.Tensor, start: int, stop: int) -> torch.Tensor:
+        """h = [z, log diag P] (B, T, 2n) with log diag P on frames [start, stop) held at frame start - 1's:
+        the decoder then reads the state's mean through a gap with a variance it knows (the dissection's
+        clamped gain, ``drfkit.methods.dissection``)."""
+        out = h.clone()
+        out[:, start:stop, self.latent:] = h[:, start - 1:start, self.latent:]
+        return out
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)

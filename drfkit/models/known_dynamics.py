@@ -186,13 +186,13 @@ class KnownDynamicsFilter(SequenceModel):
         P = torch.diag_embed(torch.stack([r0[:, 0], torch.full_like(theta, self.init_velocity_var)], -1))
         return x, P
 
-    def _step(self, x, P, w, r):
+    def _step(self, x, P, w, r, q_scale: float = 1.0):
         """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F and the prior
         (x, P) before the update."""
         step = pendulum_step if self.transition == "true" else self.learned
         theta, omega, F = step(x[:, 0], x[:, 1])
         prior = torch.stack([theta, omega], -1)
-        p_prior = F @ P @ F.mT + torch.diag_embed(self.log_q.exp().expand_as(prior))
+        p_prior = F @ P @ F.mT + torch.diag_embed((self.log_q.exp() * q_scale).expand_as(prior))
         s, c = torch.sin(theta), torch.cos(theta)
         zero = torch.zeros_like(theta)
         H = torch.stack([torch.stack([-s, zero], -1), torch.stack([c, zero], -1)], -2)       # (B, 2, 2)
@@ -200,7 +200,7 @@ class KnownDynamicsFilter(SequenceModel):
         return x, P, K, F, (prior, p_prior)
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
-                     return_prior: bool = False) -> dict[str, torch.Tensor]:
+                     return_prior: bool = False, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
         """The EKF on w, r (B, T, 2). Always 'x' (B, T, 2) = (theta, omega) and 'p' (B, T, 2, 2).
         ``return_gains``: 'gains' K (B, T, 2, 2) (state x observation; t = 0: the start's, theta from w_0),
         'F' (B, T-1, 2, 2); ``return_prior``: 'x_prior' (B, T-1, 2), 'p_prior' (B, T-1, 2, 2)."""
@@ -215,7 +215,7 @@ class KnownDynamicsFilter(SequenceModel):
             eye[:, 0, 1] = torch.cos(x[:, 0])
             Ks.append(eye)
         for t in range(1, w.shape[1]):
-            x, P, K, F, (prior, p_prior) = self._step(x, P, w_steps[t], r_steps[t])
+            x, P, K, F, (prior, p_prior) = self._step(x, P, w_steps[t], r_steps[t], q_scale)
             xs.append(x), Ps.append(P)
             if return_gains:
                 Ks.append(K), Fs.append(F)
@@ -281,6 +281,35 @@ class KnownDynamicsFilter(SequenceModel):
                 "prior_err": (unit(prior_theta) - w[:, 1:]).norm(dim=-1),
                 "static_err": (unit(last_theta) - w[:, 1:]).norm(dim=-1),
                 "spectral_radius": torch.linalg.eigvals(F).abs().amax(-1) if len(F) else F.new_empty(0),
+                "h": self.belief(tr["x"], tr["p"])}
+
+    observed_dims = 2  # the observation (cos theta, sin theta)
+
+    def observed_truth(self, w_clean: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """The true (cos theta, sin theta) (B, T, 2): the observation's own units."""
+        return targets
+
+    def hold_belief_variance(self, h: torch.Tensor, start: int, stop: int) -> torch.Tensor:
+        """The belief (B, T, 5) with its log variances on frames [start, stop) held at frame start - 1's
+        (the head's mean does not read them: the same mean)."""
+        out = h.clone()
+        out[:, start:stop, 3:] = h[:, start - 1:start, 3:]
+        return out
+
+    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
+        """The EKF on w, r (B, T, 2) with Q times ``q_scale``, seen in the observation's space (``drfkit.methods.dissection``):
+        'prior' (B, T-1, 2) h(f(x_{t-1})), 'p_prior' (B, T-1, 2) diag(H P_prior H^T), 'q' (B, T-1, 2)
+        diag(H Q H^T), 'gain' (B, T, 2) diag(H K) (how much of an innovation reaches the estimate; 1 at
+        t = 0), 'h' the belief the head reads."""
+        tr = self.filter_steps(w, r, return_gains=True, return_prior=True, q_scale=q_scale)
+        theta = tr["x_prior"][..., 0]
+        s, c = torch.sin(theta), torch.cos(theta)
+        tangent_sq = torch.stack([s * s, c * c], -1)                                          # diag(H e_theta e_theta^T H^T)
+        H_prior = torch.stack([-s, c], -1)                                                    # (B, T-1, 2): H's theta column
+        gain = (H_prior.unsqueeze(-1) * tr["gains"][:, 1:, :1, :]).diagonal(dim1=-2, dim2=-1)  # diag(H K)
+        return {"prior": torch.stack([c, s], -1), "p_prior": tr["p_prior"][..., 0, 0].unsqueeze(-1) * tangent_sq,
+                "q": self.log_q[0].exp() * q_scale * tangent_sq,
+                "gain": torch.cat([torch.ones_like(w[:, :1]), gain], 1),
                 "h": self.belief(tr["x"], tr["p"])}
 
     # ---------------------------------------------------------------- streaming

@@ -101,7 +101,7 @@ def dynamics_lines(tables: Path) -> list[str]:
         mae_cols = [c for c in pt if c.startswith("mae_") and c != "mae_after_blackout"]
         mean = pt.groupby(["protocol", "model"], sort=False).mean(numeric_only=True)
         b = pd.read_csv(bound).groupby("noise")["mae"].mean()
-        lines += ["Does the filter filter? Test MAE (MC dropout mean, seed means) of each protocol's models beside "
+        lines += ["Does the filter filter? Test MAE (dropout-off, seed means) of each protocol's models beside "
                   "the true-physics reference (a particle filter with the generator's equations on no_dynamics' "
                   "per-frame estimates: knowledge no learned model has; a comparison, not a bound, since a DRF "
                   "can do better than it), and the DRF's mechanism checks "

@@ -3,7 +3,7 @@ does every model compare with filters that know the true physics?
 
 * ``mechanism_table``  -- ``drfkit.methods.diagnostics`` per (model, seed) on the test split at one
                           noise level and on the blackout test set
-* ``blackout_curves``  -- MAE per frame through the blackout (MC dropout mean, as every
+* ``blackout_curves``  -- MAE per frame through the blackout (the dropout-off estimate, as every
                           MAE the book reports)
 * ``physics_bound``    -- (a reference, despite its name) the particle filter with the true physics fed no_dynamics' per-frame
                           estimates (``drfkit.methods.oracle``), its likelihood scale and outlier weight
@@ -42,11 +42,12 @@ def blackout_split(P, split: str) -> dict[str, np.ndarray]:
     return with_blackout(arrays, *blackout_frames(arrays["images"].shape[1]), seed=seed)
 
 
-def _mc_mean(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """MC-dropout mean and total sigma of ``model`` on arrays['images'] (any model input), seeded."""
+def _point_and_sigma(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The dropout-off point estimate and the MC-dropout total sigma of ``model`` on arrays['images']
+    (any model input), seeded."""
     pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
                                 dropout_rates=[None], seed=seed, batch_size=256)[0]
-    return pred.mean.numpy(), pred.total.numpy()
+    return pred.point.numpy(), pred.total.numpy()
 
 
 def mechanism_table(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "test") -> pd.DataFrame:
@@ -71,7 +72,7 @@ def blackout_curves(P, models: dict[tuple[str, int], Any], split: str = "test") 
     dark = blackout_split(P, split)
     rows = []
     for (kind, seed), model in steps(models.items(), "blackout curves", len(models)):
-        mean, _ = _mc_mean(P, model, dark, seed)
+        mean, _ = _point_and_sigma(P, model, dark, seed)
         for frame, err in enumerate(abs_error_per_frame(mean, dark["targets"])):
             rows.append({"model": kind, "seed": seed, "frame": frame, "mae": float(err)})
     return pd.DataFrame(rows)
@@ -99,7 +100,7 @@ def physics_bound(P, no_dynamics: dict[int, Any], levels, n_particles: int = 100
     sets["blackout"] = blackout_split(P, "test")
     rows, curve_rows = [], []
     for seed, model in steps(no_dynamics.items(), "true-physics reference (per no_dynamics seed)", len(no_dynamics)):
-        table, curves = bound_on(lambda arrays: _mc_mean(P, model, arrays, seed), val, sets, n_particles, seed)
+        table, curves = bound_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles, seed)
         rows.append(table.assign(seed=seed))
         curve_rows.append(curves.assign(seed=seed))
     order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "n_particles"]
@@ -234,7 +235,7 @@ def pedestrian_blackout(P, split: str) -> tuple[dict[str, np.ndarray], np.ndarra
 
 
 def _depth_predictions(P, model, inputs: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    mean, total = _mc_mean(P, model, {"images": inputs}, seed)
+    mean, total = _point_and_sigma(P, model, {"images": inputs}, seed)
     return mean[..., 0], total[..., 0]
 
 

@@ -28,7 +28,8 @@ METRIC_RANGES = {"mae": (0.0, math.inf), "picp": (0.0, 1.0), "mpiw": (0.0, math.
 
 def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: float | None = None,
                    level: float = 0.95, batch_size: int = 256, device=None) -> dict[str, float]:
-    """Predict ``data`` with MC dropout and return every metric (PICP as a fraction)."""
+    """Predict ``data`` with MC dropout and return every metric (PICP as a fraction): the MAE of the
+    dropout-off pass, the interval metrics of the MC-dropout predictive Gaussian."""
     return evaluate_model_rates(model, data, n_samples=n_samples, dropout_rates=[dropout_p], level=level,
                                 batch_size=batch_size, device=device)[0]
 
@@ -49,7 +50,7 @@ def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_r
                                      dropout_rates=dropout_rates, seed=seed, batch_size=batch_size, device=device)
     out = []
     for pred in preds:
-        m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)
+        m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level, point=pred.point)
         m["aleatoric"] = float(pred.aleatoric.mean())
         m["epistemic"] = float(pred.epistemic.mean())
         out.append(m)
@@ -69,7 +70,7 @@ def compare_prediction_modes(models: dict[str, Any], data: SequenceData, *, n_sa
             torch.manual_seed(seed)
             pred = predict(model, data.inputs, n_samples=s, batch_size=batch_size)
             rows.append({"checkpoint": name, "epoch": model.checkpoint_meta.get("epoch"), "mode": mode,
-                         **prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level)})
+                         **prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level, point=pred.point)})
     return pd.DataFrame(rows)
 
 

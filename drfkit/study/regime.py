@@ -6,7 +6,7 @@ several max noise levels on the second ablation round's budget (``drfkit.study.a
 data seeds, schedule and validation judgement as the ablation), then evaluated on a TEST split
 of its own (seed ``DATA_SEED + 2``, never read by training or selection) along the whole sweep
 of max noise and on a blackout set (the test split at max noise 0.5 with ``blackout_frames``
-pure noise). MAE is the MC-dropout mean's, as everywhere in the book. Beside every trained
+pure noise). MAE is the dropout-off estimate's, as everywhere in the book. Beside every trained
 noise, the true-physics particle filter (``drfkit.methods.oracle.bound_on``) on that noise's
 no_dynamics estimates, calibrated on the validation split at its training noise.
 
@@ -69,10 +69,11 @@ def _model(name: str, seed: int, budget_name: str, out, progress: bool):
     return load_checkpoint(res.best_path)
 
 
-def _mc_mean(model, arrays, n_samples: int, seed: int, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
+def _point_and_sigma(model, arrays, n_samples: int, seed: int, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
+    """The dropout-off point estimate and the MC-dropout total sigma of ``model`` on arrays['images']."""
     pred = cached_predict_rates(model, arrays["images"], cache=cache, n_samples=n_samples, dropout_rates=[None],
                                 seed=seed, batch_size=256)[0]
-    return pred.mean.numpy(), pred.total.numpy()
+    return pred.point.numpy(), pred.total.numpy()
 
 
 def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
@@ -88,7 +89,7 @@ def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, l
     row: dict[str, Any] = {"model": kind, "variant": name, "train_noise": float(train_noise), "seed": seed,
                            "budget": budget_name, "key": key, "mae": {}}
     for level, arrays in _test_sets(out, ABLATION_BUDGETS[budget_name], levels, n_test).items():
-        mean, _ = _mc_mean(model, arrays, n_samples, seed, cache)
+        mean, _ = _point_and_sigma(model, arrays, n_samples, seed, cache)
         per_frame = abs_error_per_frame(mean, arrays["targets"])
         if level == "blackout":
             row.update(blackout_summary(per_frame, blackout_frames(per_frame.size)))
@@ -111,7 +112,7 @@ def bound_row(train_noise: float, seed: int, budget_name: str, out, levels, n_te
         return row
     model = _model(name, seed, budget_name, out, progress)
     val = ablation._split(ablation.data_dir(out), budget, "val", train_noise)
-    table, curves = bound_on(lambda arrays: _mc_mean(model, arrays, n_samples, seed, cache), val,
+    table, curves = bound_on(lambda arrays: _point_and_sigma(model, arrays, n_samples, seed, cache), val,
                              _test_sets(out, budget, levels, n_test), n_particles, seed)
     sweep = table[table["noise"] != "blackout"]
     per_frame = curves.sort_values("frame")["mae"].to_numpy()

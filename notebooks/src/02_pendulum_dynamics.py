@@ -201,7 +201,7 @@ for _, r in paper_check.iterrows():
 
 # %% [markdown]
 # ## Blackout: does the state coast?
-# MAE per frame (MC dropout mean) through the blackout: a filter that carries the motion forward
+# MAE per frame (dropout off) through the blackout: a filter that carries the motion forward
 # keeps a low error on the pure-noise frames and recovers at once after them; a model without a
 # state falls to guessing (predicting (0, 0) scores about 0.64).
 
@@ -394,7 +394,7 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 # The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the third round's
 # choice for the DRF, trained without pure-noise frames, with the wider encoder, and the same recipe,
 # encoder and training data for the LSTM, no_dynamics and the known-dynamics filter, each on the book's
-# schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (MC dropout mean), on
+# schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (dropout off), on
 # the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
 # here; `python -m drfkit train --profile paper --study pendulum --protocol book --threads 1`
 # trains (or resumes) its runs.

@@ -1,0 +1,116 @@
+"""The dissection of the pendulum study's filters (``drfkit.methods.dissection``) on a profile's trained
+models: per noise level, how r, the prior variance and the gain compare with the errors they stand for,
+and what the filter gives with its gain clamped on a blackout or with a competent r out of distribution.
+
+Every MAE here is the dropout-off output's. The r fit of intervention (b) reads the fit split (validation)
+at the training noise only; the scored split is another.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from drfkit.data.pendulum import blackout_frames
+from drfkit.methods import dissection as dis
+from drfkit.study import studies
+from drfkit.study.dynamics import blackout_split
+from drfkit.util.progress import steps
+
+
+def _prepared(model, arrays: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """w, r (N, T, n) on the set's frames and the observed block's truth (N, T, k)."""
+    w, r = dis.observations(model, torch.from_numpy(arrays["images"]))
+    w_clean, _ = dis.observations(model, torch.from_numpy(arrays["clean"]))
+    return w, r, model.observed_truth(w_clean, torch.from_numpy(arrays["targets"]))
+
+
+def _dropout_off_mae(model, arrays: dict[str, np.ndarray], frames: slice = slice(None)) -> float:
+    """MAE of the dropout-off output on ``frames`` of every sequence (a model without a filter too)."""
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            images = torch.from_numpy(arrays["images"])
+            mean = torch.cat([model(images[i:i + 200])[0] for i in range(0, images.shape[0], 200)])
+    finally:
+        model.train(was_training)
+    return float(np.abs(mean.double().numpy() - arrays["targets"])[:, frames].mean())
+
+
+def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", fit_split: str = "val"
+                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The dissection of every filter in ``models`` ((kind, seed) -> model; models without
+    ``filter_internals`` serve as the no_dynamics yardstick) on ``split`` at the training noise, at the
+    highest evaluation noise and on its blackout set; r of intervention (b) fit on ``fit_split`` at the
+    training noise.
+
+    Returns (calibration, interventions). calibration: one row per (model, seed, set, level bin) of
+    ``dissection.calibration_table``, set in {'train', 'ood', 'blackout'}. interventions: one row per
+    filter (model, seed): mae_train, mae_ood, mae_blackout as the model is; mae_blackout_clamped (a);
+    mae_ood_fitted_r and mae_ood_oracle_r (b), the fit's slope b (mean over dims); mae_ood_oracle_r_q (c)
+    with q_scale chosen on the fit split (e2_over_p_fit its prior calibration there); no_dynamics' mae_ood
+    (mean over its seeds, NaN without one) and the verdict of ``dissection.failure_verdict``."""
+    train_level = P.pendulum.train_max_noise
+    ood_level = max(P.pendulum.eval_max_noise)
+    sets = {"train": studies.pendulum_split(P, split, train_level),
+            "ood": studies.pendulum_split(P, split, ood_level),
+            "blackout": blackout_split(P, split)}
+    fit_set = studies.pendulum_split(P, fit_split, train_level)
+    start, stop = blackout_frames(sets["blackout"]["images"].shape[1])
+    nd = [_dropout_off_mae(m, sets["ood"]) for (kind, _), m in models.items() if kind == "no_dynamics"]
+    nd_ood = float(np.mean(nd)) if nd else float("nan")
+    calibration, interventions = [], []
+    filters = {key: m for key, m in models.items() if hasattr(m, "filter_internals")}
+    for (kind, seed), model in steps(filters.items(), "dissecting the filters", len(filters)):
+        k = model.observed_dims
+        row: dict[str, Any] = {"model": kind, "seed": seed, "train_level": train_level, "ood_level": ood_level}
+        traces = {}
+        for name, arrays in sets.items():
+            w, r, truth = _prepared(model, arrays)
+            traces[name] = (w, r, truth, dis.filter_pass(model, w, r, truth, arrays["targets"]))
+            for cal in dis.calibration_table(traces[name][3], arrays["noise"]):
+                calibration.append({"model": kind, "seed": seed, "set": name, **cal})
+        row["mae_train"] = float(traces["train"][3]["abs_err"].mean())
+        row["mae_ood"] = float(traces["ood"][3]["abs_err"].mean())
+        row["mae_blackout"] = float(traces["blackout"][3]["abs_err"][:, start:stop].mean())
+        w, r, truth, _ = traces["blackout"]
+        clamped = dis.override_r(r, dis.clamp_frames((*r.shape[:2], k), start, stop), k)
+        row["mae_blackout_clamped"] = float(dis.filter_pass(model, w, clamped, truth, sets["blackout"]["targets"],
+                                                            hold=(start, stop))["abs_err"][:, start:stop].mean())
+        fw, fr, ftruth = _prepared(model, fit_set)
+        fit_trace = dis.filter_pass(model, fw, fr, ftruth, fit_set["targets"])
+        log_a, b = dis.fit_log_linear_r(fit_trace["obs_err2_dims"], fit_set["noise"], max_level=train_level)
+        own_scale = dis.r_scale(fit_trace, fr)                              # (k,) E[err^2] / E[r] on validation
+        w, r, truth, trace = traces["ood"]
+        noise = sets["ood"]["noise"]
+        oracle_r = dis.r_from_levels(trace["obs_err2_dims"], noise) / own_scale
+        for name, r_new in (("fitted_r", dis.r_from_fit(noise, log_a, b) / own_scale), ("oracle_r", oracle_r)):
+            out = dis.filter_pass(model, w, dis.override_r(r, r_new, k), truth, sets["ood"]["targets"])
+            row[f"mae_ood_{name}"] = float(out["abs_err"].mean())
+        scale, ratio = dis.calibrate_q_scale(model, fw, fr, ftruth, fit_set["targets"])
+        out = dis.filter_pass(model, w, dis.override_r(r, oracle_r, k), truth, sets["ood"]["targets"], q_scale=scale)
+        row["mae_ood_oracle_r_q"] = float(out["abs_err"].mean())
+        row |= {"fitted_r_slope": float(np.mean(b)), "r_scale_fit": float(np.mean(own_scale)), "q_scale": scale,
+                "e2_over_p_fit": ratio,
+                "no_dynamics_mae_ood": nd_ood}
+        row["failure"] = dis.failure_verdict(row["mae_blackout_clamped"], row["mae_ood_oracle_r"], nd_ood,
+                                             row["mae_ood_oracle_r_q"])
+        interventions.append(row)
+    return pd.DataFrame(calibration), pd.DataFrame(interventions)
+
+
+def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
+    """Per (model, set): the calibration ratios and the gain over the set's frames, mean over seeds and
+    level bins weighted by frames -- the dissection's table in one screen."""
+    cols = ["r", "p_prior", "q", "gain", "obs_err2", "prior_err2"]
+    weighted = calibration.assign(**{c: calibration[c] * calibration["frames"] for c in cols})
+    g = weighted.groupby(["model", "seed", "set"], sort=False)[[*cols, "frames"]].sum()
+    per = g[cols].div(g["frames"], axis=0)
+    per["err2_over_r"], per["e2_over_p"] = per["obs_err2"] / per["r"], per["prior_err2"] / per["p_prior"]
+    return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
+
+
+__all__ = ["calibration_summary", "dissect_filters"]
