@@ -96,3 +96,25 @@ def test_calibration_points_count_standardised_residuals_of_the_total_sigma(monk
     assert cal.loc[0.5] == pytest.approx(3 / 5)
     assert cal.loc[0.95] == pytest.approx(1.0)
     assert cal.loc[0.05] == pytest.approx(1 / 5)  # only -2.4 is below z(0.05) = -1.645
+
+
+def test_a_models_reported_mae_is_its_dropout_off_mae_and_its_intervals_are_mc_dropouts():
+    # a real model with a heavy dropout rate, so that the MC mean and the dropout-off pass differ
+    from drfkit.core.metrics import mae, picp
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    model = build_model(default_config("no_dynamics", "pendulum", 2, dropout_p=0.5)).eval()
+    x = torch.randint(0, 256, (4, 6, 24, 24), dtype=torch.uint8, generator=torch.Generator().manual_seed(1))
+    y = torch.randn(4, 6, 2) * 0.1
+    data = SequenceData(x, y)
+    (m,) = evaluate_model_rates(model, data, n_samples=5, dropout_rates=[None], seed=3, cache=None)
+    with torch.no_grad():
+        point, _ = model(x)
+    assert m["mae"] == pytest.approx(mae(y.numpy(), point.numpy()), rel=1e-6)
+    torch.manual_seed(3)
+    pred = unc.predict(model, x, n_samples=5)
+    assert torch.equal(pred.point, point)
+    assert mae(y.numpy(), pred.mean.numpy()) != pytest.approx(m["mae"], rel=1e-3)  # the MC mean would differ
+    lower, upper = unc.intervals(pred)
+    assert m["picp"] == pytest.approx(picp(y.numpy(), lower.numpy(), upper.numpy()))
