@@ -202,3 +202,19 @@ def test_the_observation_loss_gradient_reaches_the_calibrated_link():
     mean.square().sum().add(sigma.sum()).backward()
     assert model.log_r0.grad is not None and model.log_r0.grad.abs().sum() > 0
     assert model.r_slope.grad.abs().sum() > 0
+
+
+def test_an_intervened_filter_is_decoded_with_the_variance_it_is_given():
+    model = paper_drf()
+    x = images(t=10)
+    w, r = (t.detach() for t in model.observe(x))
+    truth = w[..., :4].clone()
+    base = dis.filter_pass(model, w, r, truth, np.zeros((3, 10, 2)))
+    assert np.allclose(model.belief_variance(model.with_belief_variance(torch.zeros(3, 10, 8), torch.ones(3, 10, 4))), 1)
+    held = dis.held_variance(base["log_var"], 4, 8)
+    assert np.array_equal(held[:, 4:8], np.repeat(base["log_var"][:, 3:4], 4, 1)) and np.array_equal(held[:, 8:], base["log_var"][:, 8:])
+    # the same filter decoded with its own variances is the same output; with other variances another
+    same = dis.filter_pass(model, w, r, truth, np.zeros((3, 10, 2)), log_var=base["log_var"])
+    assert np.allclose(same["mean"], base["mean"], atol=1e-6)
+    other = dis.filter_pass(model, w, r, truth, np.zeros((3, 10, 2)), log_var=base["log_var"] + 3.0)
+    assert not np.allclose(other["mean"], base["mean"], atol=1e-3)

@@ -14,9 +14,6 @@ where the state is in the output's units, else the encoder's observation of the 
 The interventions replace r and rerun the same filter, nothing retrained:
 
 (a) clamped gain: r = ``R_CLAMP`` on the blackout frames (gain ~ 0): can the learned transition coast?
-    The output is decoded with the belief's variance held at the last frame before the gap: a decoder
-    that reads P (the paper's) never saw the variance of a 30-frame coast, and its mean would say so
-    rather than the transition's.
 (b) a competent r at a level no training frame had: r_t = a_i exp(b_i level_t) per observed dim, fit on
     validation frames of the training levels (``fit_log_linear_r``), and r_t = each level bin's own
     error variance on the scored frames (``r_from_levels``, an oracle no model has). Both are put on the
@@ -24,6 +21,10 @@ The interventions replace r and rerun the same filter, nothing retrained:
     filter's r need not be its error's variance, and its decoder reads P on the scale it learned.
 (c) (b)'s oracle r with q scaled so that the prior's variance matches its error on validation
     (``calibrate_q_scale``): F's prediction alone, with both variances competent.
+
+An intervened filter is decoded with the variance input its decoder saw without the intervention (in (a)
+held at the last frame before the gap): a decoder that reads P (the paper's) never saw the variances of a
+15-frame coast or of an r on another scale, and its mean would report that rather than the state's.
 
 Shapes: N sequences, T frames, k observed dims, n state dims (w and r are (N, T, n)).
 """
@@ -38,7 +39,7 @@ R_CLAMP = 1e6          # an observation variance that makes the gain ~ P / 1e6: 
 LEVEL_BIN = 0.05       # width of the noise-level bins of the calibration table and of the r fits
 COAST_MAX_MAE = 0.10   # (a) the transition coasts: blackout MAE with the gain clamped <= this
 COMPETENT_RATIO = 0.5  # (b) a competent gain helps: MAE at the OOD level <= this x no_dynamics'
-Q_SCALES = (1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)  # (c) the q scales tried when calibrating the prior's variance
+Q_SCALES = (30.0, 10.0, 3.0, 1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)  # (c) the q scales tried when calibrating the prior's variance
 
 
 def observations(model, images: torch.Tensor, batch_size: int = 200) -> tuple[torch.Tensor, torch.Tensor]:
@@ -64,17 +65,19 @@ def override_r(r: torch.Tensor, r_new: np.ndarray | torch.Tensor, k: int) -> tor
 
 
 def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, targets: np.ndarray,
-                batch_size: int = 200, q_scale: float = 1.0, hold: tuple[int, int] | None = None
+                batch_size: int = 200, q_scale: float = 1.0, log_var: np.ndarray | None = None
                 ) -> dict[str, np.ndarray]:
     """The filter on observations w, r (N, T, n), its q times ``q_scale``, against ``truth`` (N, T, k)
-    (``model.observed_truth``); ``hold`` = (start, stop): the output decoded with the belief's variance
-    held at frame start - 1's on those frames (``model.hold_belief_variance``).
+    (``model.observed_truth``); ``log_var`` (N, T, v): the output decoded with these belief log variances
+    in place of the filter's own (``model.with_belief_variance``; an intervened filter decoded with the
+    variance input its decoder knows).
 
     Returns per frame, on the observed block, as sums over its k dims (so ratios of means are ratios
     of traces): 'r' (N, T); 'obs_err2' (N, T) = ||w - x||^2 and 'obs_err2_dims' (N, T, k);
     'p_prior', 'q', 'prior_err2' (N, T-1) = trace of the prior's variance, of q, and ||F z - x||^2;
-    'gain' (N, T) mean diag of the gain over the block; 'mean' (N, T, out) the dropout-off output and
-    'abs_err' (N, T) its mean absolute error against ``targets`` (N, T, out)."""
+    'gain' (N, T) mean diag of the gain over the block; 'log_var' (N, T, v) the belief's log variances the
+    output read; 'mean' (N, T, out) the dropout-off output and 'abs_err' (N, T) its mean absolute error
+    against ``targets`` (N, T, out)."""
     k = model.observed_dims
     if truth.shape != (*w.shape[:2], k):
         raise ValueError(f"truth must be (N, T, k) = {(*w.shape[:2], k)}, got {tuple(truth.shape)}")
@@ -91,8 +94,9 @@ def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, ta
                 values = {"r": r[sl, :, :k].sum(-1), "obs_err2": err_dims.sum(-1), "obs_err2_dims": err_dims,
                           "p_prior": out["p_prior"].sum(-1), "q": out["q"].sum(-1),
                           "prior_err2": (out["prior"] - x[:, 1:]).square().sum(-1),
-                          "gain": out["gain"].mean(-1),
-                          "mean": model.head(out["h"] if hold is None else model.hold_belief_variance(out["h"], *hold))[0]}
+                          "gain": out["gain"].mean(-1), "log_var": model.belief_variance(out["h"]),
+                          "mean": model.head(out["h"] if log_var is None else model.with_belief_variance(
+                              out["h"], torch.as_tensor(log_var[sl], dtype=out["h"].dtype)))[0]}
                 for name, value in values.items():
                     parts.setdefault(name, []).append(value.double().numpy())
     finally:
@@ -174,6 +178,14 @@ def r_from_levels(obs_err2_dims: np.ndarray, noise: np.ndarray, width: float = L
     return out
 
 
+def held_variance(log_var: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """log_var (N, T, v) with frames [start, stop) holding frame start - 1's values: what the decoder
+    reads through a gap in intervention (a)."""
+    out = np.array(log_var, copy=True)
+    out[:, start:stop] = log_var[:, start - 1:start]
+    return out
+
+
 def clamp_frames(shape: tuple[int, int, int], start: int, stop: int) -> np.ndarray:
     """r_new (N, T, k) for ``override_r``: ``R_CLAMP`` on frames [start, stop), NaN (keep r) elsewhere."""
     out = np.full(shape, np.nan)
@@ -216,6 +228,6 @@ def failure_verdict(mae_blackout_clamped: float, mae_ood_competent: float, mae_o
 
 
 __all__ = ["COAST_MAX_MAE", "COMPETENT_RATIO", "LEVEL_BIN", "Q_SCALES", "R_CLAMP", "calibrate_q_scale",
-           "calibration_table", "clamp_frames",
+           "calibration_table", "clamp_frames", "held_variance",
            "failure_verdict", "filter_pass", "fit_log_linear_r", "level_bins", "observations", "override_r",
            "r_from_fit", "r_from_levels", "r_scale"]

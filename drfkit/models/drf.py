@@ -246,13 +246,15 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                 "gain": tr["gains"].diagonal(dim1=-2, dim2=-1)[..., :k],
                 "h": mean_and_log_variance(tr["z"], tr["p_diag"])}
 
-    def hold_belief_variance(self, h: torch.Tensor, start: int, stop: int) -> torch.Tensor:
-        """h = [z, log diag P] (B, T, 2n) with log diag P on frames [start, stop) held at frame start - 1's:
-        the decoder then reads the state's mean through a gap with a variance it knows (the dissection's
-        clamped gain, ``drfkit.methods.dissection``)."""
-        out = h.clone()
-        out[:, start:stop, self.latent:] = h[:, start - 1:start, self.latent:]
-        return out
+    def belief_variance(self, h: torch.Tensor) -> torch.Tensor:
+        """The log variances (..., n) of a belief h = [z, log diag P] (..., 2n)."""
+        return h[..., self.latent:]
+
+    def with_belief_variance(self, h: torch.Tensor, log_var: torch.Tensor) -> torch.Tensor:
+        """h with its log variances replaced by ``log_var`` (..., n): the dissection decodes an intervened
+        filter's mean with the variance input the decoder saw without the intervention
+        (``drfkit.methods.dissection``)."""
+        return torch.cat([h[..., :self.latent], log_var], -1)
 
     def features(self, inputs, return_gains=False):
         w, r = self.observe(inputs)

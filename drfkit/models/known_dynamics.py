@@ -289,12 +289,13 @@ class KnownDynamicsFilter(SequenceModel):
         """The true (cos theta, sin theta) (B, T, 2): the observation's own units."""
         return targets
 
-    def hold_belief_variance(self, h: torch.Tensor, start: int, stop: int) -> torch.Tensor:
-        """The belief (B, T, 5) with its log variances on frames [start, stop) held at frame start - 1's
-        (the head's mean does not read them: the same mean)."""
-        out = h.clone()
-        out[:, start:stop, 3:] = h[:, start - 1:start, 3:]
-        return out
+    def belief_variance(self, h: torch.Tensor) -> torch.Tensor:
+        """The log variances (..., 2) of a belief (..., 5)."""
+        return h[..., 3:]
+
+    def with_belief_variance(self, h: torch.Tensor, log_var: torch.Tensor) -> torch.Tensor:
+        """The belief with its log variances replaced (the head's mean does not read them)."""
+        return torch.cat([h[..., :3], log_var], -1)
 
     def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
         """The EKF on w, r (B, T, 2) with Q times ``q_scale``, seen in the observation's space (``drfkit.methods.dissection``):

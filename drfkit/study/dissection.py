@@ -78,8 +78,9 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", 
         row["mae_blackout"] = float(traces["blackout"][3]["abs_err"][:, start:stop].mean())
         w, r, truth, _ = traces["blackout"]
         clamped = dis.override_r(r, dis.clamp_frames((*r.shape[:2], k), start, stop), k)
+        held = dis.held_variance(traces["blackout"][3]["log_var"], start, stop)
         row["mae_blackout_clamped"] = float(dis.filter_pass(model, w, clamped, truth, sets["blackout"]["targets"],
-                                                            hold=(start, stop))["abs_err"][:, start:stop].mean())
+                                                            log_var=held)["abs_err"][:, start:stop].mean())
         fw, fr, ftruth = _prepared(model, fit_set)
         fit_trace = dis.filter_pass(model, fw, fr, ftruth, fit_set["targets"])
         log_a, b = dis.fit_log_linear_r(fit_trace["obs_err2_dims"], fit_set["noise"], max_level=train_level)
@@ -88,10 +89,12 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", 
         noise = sets["ood"]["noise"]
         oracle_r = dis.r_from_levels(trace["obs_err2_dims"], noise) / own_scale
         for name, r_new in (("fitted_r", dis.r_from_fit(noise, log_a, b) / own_scale), ("oracle_r", oracle_r)):
-            out = dis.filter_pass(model, w, dis.override_r(r, r_new, k), truth, sets["ood"]["targets"])
+            out = dis.filter_pass(model, w, dis.override_r(r, r_new, k), truth, sets["ood"]["targets"],
+                                  log_var=trace["log_var"])
             row[f"mae_ood_{name}"] = float(out["abs_err"].mean())
         scale, ratio = dis.calibrate_q_scale(model, fw, fr, ftruth, fit_set["targets"])
-        out = dis.filter_pass(model, w, dis.override_r(r, oracle_r, k), truth, sets["ood"]["targets"], q_scale=scale)
+        out = dis.filter_pass(model, w, dis.override_r(r, oracle_r, k), truth, sets["ood"]["targets"], q_scale=scale,
+                              log_var=trace["log_var"])
         row["mae_ood_oracle_r_q"] = float(out["abs_err"].mean())
         row |= {"fitted_r_slope": float(np.mean(b)), "r_scale_fit": float(np.mean(own_scale)), "q_scale": scale,
                 "e2_over_p_fit": ratio,
