@@ -224,8 +224,40 @@ def test_f1_uses_the_sign_of_rho():
     assert f1(0.0)["verdict"] == claims.NOT
     row = f1([-0.65, -0.09, -0.50])
     assert row["verdict"] == claims.NOT and "r falls as frames get noisier" in row["ours"]
-    assert "-0.41 [-1.13, +0.31]" in row["ours"]  # the book's seeds, with their interval
+    # the book's seeds, with Fisher's z interval (tanh of a t-interval of atanh(rho)): inside [-1, 1], where a
+    # t-interval of the rhos themselves would be -0.41 [-1.13, +0.31]
+    assert "-0.44 [-0.87, +0.38]" in row["ours"]
     assert f1(0.79, 0.9, 2.6)["verdict"] == claims.NOT  # positive but nothing met
+
+
+def test_f1_a_pass_through_gain_is_never_partly():
+    """The gain is the mechanism: with a gain on pure noise >= 0.9 of the clean one the filter does not respond to
+    frame quality, so r following the noise and F predicting do not make it 'partly'."""
+    f1 = lambda *a: claims.f1_filter_mechanism(mechanism(*a), 0.75)  # noqa: E731
+    assert f1(0.9, 0.8999, 0.5)["verdict"] == claims.PARTLY
+    row = f1(0.9, 0.9, 0.5)
+    assert row["verdict"] == claims.NOT and "a pass-through" in row["ours"]
+    assert f1(0.9, 1.0006, 0.12)["verdict"] == claims.NOT  # the book protocol's output-units DRF at paper scale
+
+
+def test_f1s_correlation_interval_stays_inside_minus_one_and_one():
+    from drfkit.study.claims.verdicts import correlation_interval
+    mean, lo, hi = correlation_interval([0.78, 0.62, 0.89])
+    assert -1 < lo < mean < hi < 1 and hi < 1.0
+    assert correlation_interval([0.5])[0] == pytest.approx(0.5) and math.isnan(correlation_interval([0.5])[1])
+
+
+def test_f2_partly_must_beat_chance_beyond_the_seeds_interval_and_references_are_not_baselines():
+    dark = pd.DataFrame({"model": ["drf"] * 3 + ["lstm"] * 3 + ["no_dynamics"] * 3 + ["known_dynamics"] * 3,
+                         "seed": [0, 1, 2] * 4,
+                         "mae_blackout": [0.62, 0.64, 0.68, 0.70, 0.72, 0.74, 0.66, 0.70, 0.75, 0.08, 0.09, 0.10]})
+    # below both baselines, but the seeds' interval reaches past chance (always (0, 0): 0.637): not partly
+    row = claims.f2_blackout_coasting(dark, 0.1, chance=0.637)
+    assert row["verdict"] == claims.NOT and "chance (always (0, 0)) 0.637" in row["ours"]
+    assert "known_dynamics 0.090" in row["ours"]  # shown, but a reference does not count as a baseline
+    tight = dark.assign(mae_blackout=dark["mae_blackout"].where(~dark["model"].eq("drf"), [0.40, 0.41, 0.42] + [0] * 9))
+    assert claims.f2_blackout_coasting(tight, 0.1, chance=0.637)["verdict"] == claims.PARTLY
+    assert claims.f2_blackout_coasting(tight, 0.1)["verdict"] == claims.NOT  # chance unknown: no partly
 
 
 def test_f2_is_labelled_by_the_protocols_training_frames(monkeypatch):

@@ -11,7 +11,7 @@ import torch
 
 from drfkit.methods import dissection as dis
 from drfkit.models import build_model, default_config
-from drfkit.models.calibrated_drf import frame_noise_statistic
+from drfkit.models.drf import frame_noise_statistic
 
 torch.set_num_threads(1)
 
@@ -218,3 +218,40 @@ def test_an_intervened_filter_is_decoded_with_the_variance_it_is_given():
     assert np.allclose(same["mean"], base["mean"], atol=1e-6)
     other = dis.filter_pass(model, w, r, truth, np.zeros((3, 10, 2)), log_var=base["log_var"] + 3.0)
     assert not np.allclose(other["mean"], base["mean"], atol=1e-3)
+
+
+def test_the_in_distribution_screen_reads_only_levels_up_to_the_training_noise():
+    n, t = 50, 6
+    rng = np.random.default_rng(1)
+    noise = rng.uniform(0, 0.5, size=(n, t))
+    noise[:, -1] = 1.0                                            # pure noise: must be left out
+    trace = {"r": np.exp(2.0 * noise), "gain": 0.8 - 0.6 * noise, "abs_err": np.full((n, t), 0.01)}
+    trace["abs_err"][:, -1] = 5.0
+    out = dis.in_distribution_screen(trace, noise, max_level=0.5)
+    assert out["r_level_spearman"] == pytest.approx(1.0) and out["r_log_slope"] == pytest.approx(2.0, abs=1e-6)
+    assert out["gain_slope"] == pytest.approx(-0.6, abs=1e-6) and out["mae"] == pytest.approx(0.01)
+
+
+def test_the_screen_rule_picks_the_most_accurate_eligible_variant_and_breaks_ties_by_the_gain_slope():
+    import pandas as pd
+    from drfkit.study.dissection import screen_choice
+
+    means = pd.DataFrame({"r_level_spearman": [0.95, 0.79, 0.9, 0.85], "gain_slope": [-0.1, -0.9, -0.5, 0.1],
+                          "mae": [0.0100, 0.0050, 0.0104, 0.0060]}, index=["a", "b", "c", "d"])
+    out = screen_choice(means)
+    assert out["eligible"].tolist() == [True, False, True, False]  # b: rho < 0.8; d: the gain rises
+    assert out.index[out["chosen"]].tolist() == ["c"]               # a and c tie within 5 %: the steeper slope
+    assert not screen_choice(means.assign(gain_slope=0.2))["chosen"].any()
+
+
+def test_the_screen_command_judges_trained_variants_on_validation_only(tmp_path, capsys):
+    from drfkit.cli import main as cli
+
+    out = tmp_path / "screen.csv"
+    assert cli(["screen", "--budget", "fit_tiny", "--variants", "fit_calibrated_wide", "--seeds", "0",
+                "--out", str(tmp_path), "--csv", str(out)]) == 0
+    import pandas as pd
+    table = pd.read_csv(out)
+    assert table["variant"].tolist() == ["fit_calibrated_wide"] and {"eligible", "chosen", "gain_slope"} <= set(table)
+    assert not list(tmp_path.glob("data/*test*"))      # the screen never builds a test split
+    assert cli(["screen", "--variants", "nope"]) == 2 and "unknown variant" in capsys.readouterr().err

@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "claims": ("study", "judge every claim again from a profile's tables (claims.csv, claims.md)"),
     "ablation": ("study", "the protocol ablation on validation data"),
     "dynamics": ("study", "is the filter filtering: a run's mechanism diagnostics"),
+    "screen": ("study", "the calibrated-gain screen: variants judged on in-distribution validation only"),
     "bench": ("study", "the inference benchmark (make bench), results/<profile>/timing.csv"),
     "simstats": ("study", "statistics of the simulated pedestrian source"),
     "nuscenes": ("data", "nuScenes: write salt-and-pepper noisy copies of the images"),

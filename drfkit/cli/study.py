@@ -46,6 +46,38 @@ def claims(argv: list[str]) -> int:
     return 0
 
 
+def screen(argv: list[str]) -> int:
+    """``python -m drfkit screen --budget fit --variants V --seeds 0 1 [--csv F]``: train (or load) the protocol
+    ablation's runs of the variants and judge them by the screening rule on the validation split at the
+    training noise only (``drfkit.study.dissection.screen_variants``); prints the table, writes it to --csv."""
+    import torch
+
+    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, variant_spec
+    from drfkit.study.dissection import screen_variants
+    from drfkit.util.io import atomic_write_csv
+
+    ap = parser("screen", "Judge variants by the calibrated-gain screen (validation at the training noise only).")
+    ap.add_argument("--budget", default="fit", choices=sorted(ABLATION_BUDGETS))
+    ap.add_argument("--variants", nargs="+", required=True, help=f"from {sorted(VARIANTS)}")
+    ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--out", default=None, help="the ablation's folder (default results/ablation)")
+    ap.add_argument("--csv", default=None, help="also write the table here")
+    args = ap.parse_args(argv)
+    for name in args.variants:
+        try:
+            variant_spec(name)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    torch.set_num_threads(args.threads)
+    table = screen_variants(args.variants, args.seeds, args.budget, args.out)
+    print(table.round(4).to_string(index=False))
+    if args.csv:
+        atomic_write_csv(args.csv, table)
+    return 0
+
+
 def ablation(argv: list[str]) -> int:
     """``python -m drfkit ablation --budget fit --variants V --seeds 0 1``: train and judge protocol
     variants on validation data (``drfkit.study.ablation``; resumable), or with ``--summary`` print

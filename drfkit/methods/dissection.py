@@ -206,6 +206,27 @@ def calibrate_q_scale(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tens
     return best[1], best[2]
 
 
+def in_distribution_screen(trace: dict[str, np.ndarray], noise: np.ndarray, max_level: float,
+                           width: float = LEVEL_BIN) -> dict[str, float]:
+    """What the calibrated-gain screen reads of a :func:`filter_pass` on frames of levels <= ``max_level``
+    only (validation at the training noise; frames t >= 1): 'r_level_spearman' rank correlation of log r
+    with the level over frames, 'r_log_slope' and 'gain_slope' least-squares slopes of each level bin's mean
+    log r and mean gain on its mean level, and 'mae' of the dropout-off output."""
+    from drfkit.core.metrics import rank_correlation
+
+    noise = np.asarray(noise, dtype=np.float64)[:, 1:]
+    keep = noise <= max_level
+    r, gain = trace["r"][:, 1:], trace["gain"][:, 1:]
+    bins = level_bins(noise, width)
+    xs, log_r, gains = [], [], []
+    for b in np.unique(bins[keep]):
+        at = keep & (bins == b)
+        xs.append(noise[at].mean()), log_r.append(np.log(r[at]).mean()), gains.append(gain[at].mean())
+    slope = (lambda y: float(np.polyfit(xs, y, 1)[0])) if len(xs) >= 2 else (lambda y: math.nan)
+    return {"r_level_spearman": rank_correlation(np.log(r[keep]), noise[keep]), "r_log_slope": slope(log_r),
+            "gain_slope": slope(gains), "mae": float(trace["abs_err"][:, 1:][keep].mean())}
+
+
 def failure_verdict(mae_blackout_clamped: float, mae_ood_competent: float, mae_ood_no_dynamics: float,
                     mae_ood_competent_q: float = math.nan, coast_max: float = COAST_MAX_MAE,
                     ratio_max: float = COMPETENT_RATIO) -> str:
@@ -229,5 +250,5 @@ def failure_verdict(mae_blackout_clamped: float, mae_ood_competent: float, mae_o
 
 __all__ = ["COAST_MAX_MAE", "COMPETENT_RATIO", "LEVEL_BIN", "Q_SCALES", "R_CLAMP", "calibrate_q_scale",
            "calibration_table", "clamp_frames", "held_variance",
-           "failure_verdict", "filter_pass", "fit_log_linear_r", "level_bins", "observations", "override_r",
+           "failure_verdict", "filter_pass", "in_distribution_screen", "fit_log_linear_r", "level_bins", "observations", "override_r",
            "r_from_fit", "r_from_levels", "r_scale"]

@@ -118,7 +118,7 @@ ROUND3_VARIANTS = {
     # the paper's DRF as written (30-dim LayerNorm latent, ELU + 1 r, LSTM transition, decoder on [z, P] with
     # MC dropout), fit with the recipe that fits the mean and the wider encoder, as its baselines are
     "fit_paper_wide": {"kind": "drf", "model": _WIDE, "train": FIT_THE_MEAN},
-    # the DRF whose gain is calibrated out of distribution (``drfkit.models.calibrated_drf``): r from the frame's
+    # the DRF whose gain is calibrated out of distribution (``drfkit.models.drf.CalibratedGainDRF``): r from the frame's
     # noise statistic through a monotone log-linear link; alone, and with the one-step prior decoded and fitted
     # (a prior variance far above the prior's error costs likelihood there: q is held to what F achieves)
     "fit_calibrated_wide": {"kind": "drf_calibrated", "model": _WIDE, "train": FIT_THE_MEAN},

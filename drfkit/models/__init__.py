@@ -13,8 +13,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from drfkit.models.calibrated_drf import CalibratedGainDRF
-from drfkit.models.drf import DeepRecursiveFilter
+from drfkit.models.drf import CalibratedGainDRF, DeepRecursiveFilter
 from drfkit.models.known_dynamics import KnownDynamicsFilter
 from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_loss
 from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads

@@ -105,6 +105,49 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", 
     return pd.DataFrame(calibration), pd.DataFrame(interventions)
 
 
+# the calibrated-gain screen's rule, written before its runs (docs/dynamics.md)
+SCREEN_MIN_SPEARMAN = 0.8
+SCREEN_MAE_TIE = 0.05
+
+
+def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5) -> pd.DataFrame:
+    """The calibrated-gain screen on VALIDATION data at the training noise only (levels <= ``train_level``;
+    never 0.75 or a blackout): per trained (variant, seed) of the protocol ablation (``drfkit.study.ablation``,
+    trained if missing) ``dissection.in_distribution_screen``; 'eligible' and 'chosen' by the rule:
+    seed means with rho(log r, level) >= SCREEN_MIN_SPEARMAN and gain slope < 0 are eligible, the lowest
+    MAE is chosen, MAEs within SCREEN_MAE_TIE of the lowest are a tie broken by the steeper gain slope."""
+    from drfkit.methods.train import load_checkpoint
+    from drfkit.study import ablation
+
+    rows = []
+    for variant in variants:
+        for seed in seeds:
+            res, _ = ablation.train_variant(variant, seed, budget_name, out, progress=False)
+            budget, _, _, _ = ablation._run(variant, seed, budget_name, out)
+            val = ablation._split(ablation.data_dir(out), budget, "val", train_level)
+            model = load_checkpoint(res.best_path)
+            w, r, truth = _prepared(model, val)
+            trace = dis.filter_pass(model, w, r, truth, val["targets"])
+            rows.append({"variant": variant, "seed": seed,
+                         **dis.in_distribution_screen(trace, val["noise"], max_level=train_level)})
+    table = pd.DataFrame(rows)
+    means = table.groupby("variant", sort=False).mean(numeric_only=True).drop(columns="seed")
+    return screen_choice(means.join(table.groupby("variant", sort=False).size().rename("n_seeds"))).reset_index()
+
+
+def screen_choice(means: pd.DataFrame) -> pd.DataFrame:
+    """The screen's rule on seed means indexed by variant (r_level_spearman, gain_slope, mae): adds
+    'eligible' and 'chosen' (at most one row; none when no variant is eligible)."""
+    means = means.copy()
+    means["eligible"] = (means["r_level_spearman"] >= SCREEN_MIN_SPEARMAN) & (means["gain_slope"] < 0)
+    means["chosen"] = False
+    pool = means[means["eligible"]]
+    if len(pool):
+        tied = pool[pool["mae"] <= pool["mae"].min() * (1 + SCREEN_MAE_TIE)]
+        means.loc[tied["gain_slope"].idxmin(), "chosen"] = True
+    return means
+
+
 def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     """Per (model, set): the calibration ratios and the gain over the set's frames, mean over seeds and
     level bins weighted by frames -- the dissection's table in one screen."""
@@ -116,4 +159,4 @@ def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
 
 
-__all__ = ["calibration_summary", "dissect_filters"]
+__all__ = ["SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters", "screen_choice", "screen_variants"]

@@ -149,8 +149,16 @@ PROTOCOL_COLUMNS = ("r_noise_spearman", "gain_clean", "gain_pure_blackout", "gai
                     "spectral_radius_median")
 
 
+def blackout_chance(P, split: str = "test") -> float:
+    """The MAE of always answering (0, 0) on the blackout frames of ``split``'s blackout set: the error of
+    a model that knows nothing there (what F2's 'partly' must beat)."""
+    dark = blackout_split(P, split)
+    start, stop = blackout_frames(dark["targets"].shape[1])
+    return float(np.abs(dark["targets"][:, start:stop]).mean())
+
+
 def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, dark: pd.DataFrame,
-                   pure_noise_training: str | None = None) -> pd.DataFrame:
+                   pure_noise_training: str | None = None, chance: float = math.nan) -> pd.DataFrame:
     """One row per (model, seed) of a protocol: MAE at each test level ('mae_<level>', from
     ``evaluate_study``), on and after the blackout (``blackout_table``) and the mechanism checks
     (``mechanism_table``; NaN where a model has no filter); 'pure_noise_training': why the protocol's
@@ -160,7 +168,8 @@ def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, 
     wide.columns = [f"mae_{c:g}" for c in wide.columns]
     mech = mechanism.set_index(["model", "seed"]).reindex(columns=list(PROTOCOL_COLUMNS))
     out = wide.join(dark.set_index(["model", "seed"])[["mae_blackout", "mae_after_blackout"]]).join(mech)
-    out = out.reset_index().assign(protocol=protocol, pure_noise_training=pure_noise_training or "")
+    out = out.reset_index().assign(protocol=protocol, pure_noise_training=pure_noise_training or "",
+                                   mae_blackout_chance=chance)
     return out[["protocol", "model", "seed", *[c for c in out.columns if c not in ("protocol", "model", "seed")]]]
 
 

@@ -404,9 +404,11 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 pieces = {"paper": (evals, mechanism, dark_table)}
 dark_curves = {"paper": curves_dark[curves_dark["model"] != "physics_bound"]}
 bounds = {"paper": bound}
+protocol_models = {"paper": models}
 for protocol in P.pendulum.protocols:
     if protocol != "paper":
         trained = studies.trained_models(P, "pendulum", progress=True, protocol=protocol, write_curves=True)
+        protocol_models[protocol] = trained
         dark_curves[protocol] = dynamics.blackout_curves(P, trained)
         pieces[protocol] = (evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, models=trained),
                             cached(P.profile, dynamics.mechanism_table, P, trained, level, timing=False),
@@ -416,10 +418,59 @@ for protocol in P.pendulum.protocols:
                                   P.pendulum.eval_max_noise, n_particles=P.dynamics.bound_particles, timing=False)[0]
 from drfkit.study.claims.mechanism import pure_noise_training
 
-protocols = pd.concat([dynamics.protocol_table(name, *parts, pure_noise_training=pure_noise_training(name))
+chance = dynamics.blackout_chance(P)  # always answering (0, 0) on the blackout frames: F2's floor
+protocols = pd.concat([dynamics.protocol_table(name, *parts, pure_noise_training=pure_noise_training(name),
+                                               chance=chance)
                        for name, parts in pieces.items()], ignore_index=True)
 save_table(P.profile, "pendulum_protocols", protocols)
 protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).drop(columns="seed").round(4)
+
+# %% [markdown]
+# ## Why a filter does or does not filter: the dissection
+# The checks above say *whether* the gain follows frame quality; the dissection (`drfkit.methods.dissection`,
+# inference only, every filter of every protocol) says *why*. On the observed block of the state it compares
+# each variance with the error it stands for, per noise level: E[err²] / E[r] for the observation
+# (err = w_t − x_t) and E[e²] / E[P̂] for the one-step prior (e = F z_{t−1} − x_t), x_t the truth in the
+# observation's space (the true (cos θ, sin θ) for the known-dynamics filter, the encoder's code of the same
+# frame without noise for a latent DRF); a ratio far below 1 is a variance far above its error. Then it
+# intervenes on the same filter, nothing retrained: (a) the gain clamped to ≈ 0 on the blackout frames (can
+# the transition coast?), (b) a competent r at the out-of-distribution level (a log-linear law in the level
+# fit on validation frames of the training levels, and the oracle: each level's own error variance), (c) the
+# oracle r with q scaled to the value whose prior variance matches its error on validation. The rule, written
+# before the measurement (`dissection.failure_verdict`, docs/dynamics.md): the failure is the **gain**'s if (a)
+# coasts (blackout MAE ≤ 0.10) and (b) brings the MAE at the highest noise to half of no_dynamics' or less;
+# the **prior variance**'s if only (c) does; otherwise the **transition**'s. Every MAE is the dropout-off one.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.study import dissection
+
+calibration, interventions = [], []
+for name, trained_models in protocol_models.items():
+    cal, inter = cached(P.profile, dissection.dissect_filters, P, trained_models, timing=False)
+    calibration.append(cal.assign(protocol=name))
+    interventions.append(inter.assign(protocol=name))
+calibration = pd.concat(calibration, ignore_index=True)
+interventions = pd.concat(interventions, ignore_index=True)
+save_table(P.profile, "pendulum_dissection_calibration", calibration)
+save_table(P.profile, "pendulum_dissection", interventions)
+(calibration.groupby("protocol", sort=False)
+ .apply(dissection.calibration_summary, include_groups=False).round(4))
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+interventions[["protocol", "model", "seed", "mae_train", "mae_ood", "mae_blackout", "mae_blackout_clamped",
+               "mae_ood_fitted_r", "mae_ood_oracle_r", "mae_ood_oracle_r_q", "no_dynamics_mae_ood", "failure"]].round(4)
+
+# %% [markdown]
+# How to read the two tables. A gain near 1 on clean and pure-noise frames alike, with E[err²] / E[r] of
+# hundreds on the out-of-distribution sets, is an r that does not rise with frames worse than any seen in
+# training; E[e²] / E[P̂] far from 1 is a transition whose variance misstates its error. The interventions
+# then separate the two: a clamped-gain blackout MAE far above 0.10 is a transition that cannot carry the
+# state even when told to ignore the frames (a latent state that grows without bound shows as an MAE far
+# above 1), and a competent r that does not lower the MAE at the highest noise is a transition whose
+# prediction is no better than the frames it would replace. docs/dynamics.md quotes the paper profile's
+# numbers and verdicts.
 
 # %% [markdown]
 # Each protocol's true-physics reference, on its own no_dynamics (seed means; the blackout's over the

@@ -39,6 +39,20 @@ def seed_interval(values: Iterable[float]) -> tuple[float, float, float]:
     return mean, mean - half, mean + half
 
 
+def correlation_interval(values: Iterable[float]) -> tuple[float, float, float]:
+    """Mean of per-seed correlations and a 95 % interval computed on Fisher's z = atanh(rho) (a t-interval
+    of the z's, mapped back by tanh): it stays inside [-1, 1], as a t-interval of the rhos need not."""
+    x = np.asarray([v for v in values if not (isinstance(v, float) and math.isnan(v))], dtype=float)
+    if len(x) == 0:
+        return math.nan, math.nan, math.nan
+    z = np.arctanh(np.clip(x, -0.999999, 0.999999))
+    mean = float(np.tanh(z.mean()))
+    if len(x) < 2:
+        return mean, math.nan, math.nan
+    half = t975(len(x) - 1) * float(z.std(ddof=1)) / math.sqrt(len(x))
+    return mean, float(np.tanh(z.mean() - half)), float(np.tanh(z.mean() + half))
+
+
 def fmt_interval(interval: tuple[float, float, float], scale: float = 1.0, digits: int = 2, sign: bool = False,
                  unit: str = "") -> str:
     """'mean [lo, hi]' (or 'mean' alone when the interval is undefined), scaled, to ``digits`` decimals."""
@@ -136,5 +150,5 @@ CURVE_RULE = ("reproduced: every DRF point lies above every baseline's curve at 
 
 
 __all__ = ["REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "VERDICTS", "SATURATED_PICP", "at_most",
-           "seed_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
+           "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
            "curve_shares", "share_text", "curve_verdict", "CURVE_RULE"]
