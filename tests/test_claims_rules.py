@@ -346,3 +346,50 @@ def test_no_evaluation_counts_a_level_or_a_seed_twice():
     for src in (REPO_ROOT / "notebooks" / "src").glob("*.py"):
         for call in re.findall(r"evaluate_study\((.*)", src.read_text()):
             assert not re.search(r"\[[^\]]*\*", call), (src.name, call)  # a level list built as [a, *b]
+
+
+# ------------------------------------------------------------------------------ the referee's third read
+def test_c4_is_an_equivalence_test_on_the_paired_interval():
+    from drfkit.study.claims.c4_pedestrian_parity import parity_verdict
+    nan = float("nan")
+    assert parity_verdict(0.05, (0.05, -0.10, 0.10)) == claims.REPRODUCED          # the interval inside +/- 10 %
+    assert parity_verdict(0.09, (0.09, -0.063, 0.242)) == claims.INCONCLUSIVE      # the committed paper row
+    assert parity_verdict(0.05, (0.05, -0.1001, 0.10)) == claims.INCONCLUSIVE
+    assert parity_verdict(-0.2, (-0.2, -0.3, -0.1001)) == claims.BETTER
+    assert parity_verdict(0.17, (0.17, 0.1001, 0.25)) == claims.PARTLY
+    assert parity_verdict(0.3, (0.3, 0.2501, 0.4)) == claims.NOT
+    assert parity_verdict(0.17, (0.17, 0.024, 0.318)) == claims.INCONCLUSIVE       # straddles +10 %
+    assert parity_verdict(0.05, (0.05, nan, nan)) == claims.REPRODUCED             # no seeds: the means decide
+    table = by_seed((0.8, 1, 1), (1, 1, 1), (1, 1, 1), (0.8, 1, 1), (1.4, 1, 1), spread=0.001)
+    row = claims.c4_in_distribution_parity(summary_of(table), 0.01, by_seed=table)
+    assert row["verdict"] == claims.REPRODUCED
+    assert "ordering (DRF below no_dynamics and the LSTM) holds: DRF vs no_dynamics -20.0%" in row["ours"]
+    level = by_seed((1.0, 1, 1), (1, 1, 1), (0.9, 1, 1), (1.0, 1, 1), (1.4, 1, 1), spread=0.001)
+    assert "does not hold" in claims.c4_in_distribution_parity(summary_of(level), 0.01, by_seed=level)["ours"]
+
+
+def test_c2_and_c5_are_not_testable_for_a_drf_without_a_dropout_head():
+    flat = curves(0.64, 0.86, 0.001).assign(nll=[573.0] * 2 + [0.1] * 4, cal_error=0.01)
+    flat.loc[flat["model"] == "drf", "mpiw"] = 1.5                     # one point for every dropout rate
+    row = claims.c2_pendulum_picp_mpiw(flat, (0.75,))
+    assert row["verdict"] == claims.NOT_TESTABLE and "NLL 573 vs 0.1" in row["ours"] and "PICP 64% vs 86%" in row["ours"]
+    c5 = claims.c5_intervals_under_shift(flat, [("pendulum", 0.75)], {"pendulum": ["lstm", "no_dynamics"]})
+    assert c5["verdict"] == claims.NOT_TESTABLE and "no dropout head" in c5["ours"]
+
+
+def test_c5_compares_the_pedestrians_with_the_input_matched_monoloco(monkeypatch):
+    from types import SimpleNamespace
+    import importlib
+    c5 = importlib.import_module("drfkit.study.claims.c5_intervals_under_shift")
+
+    ped = pd.DataFrame([{"study": "pedestrians", "protocol": "paper", "model": m, "noise": 0.05, "mpiw": w, "picp": p,
+                         "picp_lo": p, "picp_hi": p} for m, w, p in
+                        (("drf", 1.0, 0.9), ("drf", 2.0, 0.95), ("monoloco", 1.5, 0.5))])
+    matched = pd.DataFrame([{"model": MATCHED, "noise": 0.05, "mpiw": 1.5, "picp": 0.99, "picp_lo": 0.99,
+                             "picp_hi": 0.99}])
+    ood = SimpleNamespace(by_protocol=lambda: [("paper", [("pedestrians", "paper")])], curves=ped,
+                          shifted={"pedestrians": [0.05]}, baselines={"pedestrians": ["monoloco"]}, matched=matched)
+    (protocol, row), = c5.judge(ood)
+    assert "vs monoloco_detected_inputs: 0%" in row["ours"] and "vs monoloco:" not in row["ours"]
+    assert row["verdict"] == claims.NOT
+    assert c5.judge(SimpleNamespace(**{**vars(ood), "matched": None}))[0][1]["verdict"] == claims.REPRODUCED

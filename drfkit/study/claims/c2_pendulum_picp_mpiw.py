@@ -9,17 +9,20 @@ import pandas as pd
 
 from drfkit.study import paper
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, curve_shares, curve_verdict, rows_of,
-                                          share_text)
+from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
+                                          curve_verdict, rows_of, share_text)
 
 
 def c2_pendulum_picp_mpiw(curve: pd.DataFrame, levels=(0.5, 0.75)) -> dict[str, Any]:
     """DRF's PICP–MPIW curve lies above each baseline's (higher PICP at equal MPIW).
     curve: summary rows (model, noise, mpiw, picp, picp_lo, picp_hi), one per dropout rate."""
-    shares, saturated = {}, []
+    shares, saturated, collapsed = {}, [], []
     for lv in levels:
         sub = curve[np.isclose(curve["noise"], lv)]
         for base in ("lstm", "no_dynamics"):
+            if collapsed_curve(sub):
+                collapsed.append(f"vs {base}@{lv}: {collapsed_text(sub, base)}")
+                continue
             pair = sub[sub["model"].isin(["drf", base])]
             if len(pair) and bool((pair["picp"] >= SATURATED_PICP).all()):
                 saturated.append(f"vs {base}@{lv}")  # every interval covers: coverage cannot rank them
@@ -29,6 +32,8 @@ def c2_pendulum_picp_mpiw(curve: pd.DataFrame, levels=(0.5, 0.75)) -> dict[str, 
     if saturated:
         ours += ("; " if ours else "") + "not informative (every PICP >= " + f"{100 * SATURATED_PICP:g}%): " \
             + ", ".join(saturated)
+    if collapsed:
+        ours += ("; " if ours else "") + "not testable, " + "; ".join(collapsed)
     return {"id": "C2", "claim": "Pendulum: DRF's PICP–MPIW curve dominates no_dynamics and LSTM",
             "paper": "DRF " + " ".join(f"({m:.2f}, {p:g}%)" for m, p in paper.PENDULUM_PICP_MPIW["drf"])
                      + " above both baselines",

@@ -7,9 +7,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, curve_shares, curve_verdict, rows_of,
-                                          share_text)
+from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
+                                          curve_verdict, rows_of, share_text)
 
 
 def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, float]],
@@ -26,6 +27,9 @@ def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, f
     for study, lv in conditions:
         sub = curves[(curves["study"] == study) & np.isclose(curves["noise"].astype(float), lv)]
         for base in baselines[study]:
+            if collapsed_curve(sub):
+                parts.append(f"{study}@{lv} vs {base}: not testable, {collapsed_text(sub, base)}")
+                continue
             pair = sub[sub["model"].isin(["drf", base])]
             if len(pair) and bool((pair["picp"] >= SATURATED_PICP).all()):
                 parts.append(f"{study}@{lv} vs {base}: not informative (every PICP >= {100 * SATURATED_PICP:g}%)")
@@ -35,8 +39,9 @@ def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, f
     return {"id": "C5", "claim": "Under shift, DRF keeps a higher PICP with a narrower MPIW than the baselines",
             "paper": "pedestrians p 0.025/0.05: DRF's curve above all; pendulum at 0.75 likewise",
             "ours": "share of DRF curve points above the baseline's curve at equal MPIW: " + "; ".join(parts),
-            "rule": "over the PICP–MPIW curves (inference dropout rates), at each out-of-distribution level; "
-                    + CURVE_RULE,
+            "rule": "over the PICP–MPIW curves (inference dropout rates), at each out-of-distribution level; on the "
+                    "pedestrians against Monoloco fed the DRF family's inputs (as C3 and C4; one point at its own "
+                    "rate); " + CURVE_RULE,
             "verdict": curve_verdict(shares)}
 
 
@@ -44,10 +49,16 @@ def judge(ood) -> Rows:
     """C5 per protocol over every study of notebook 04 (``judge.OodTables``), each study's models of that
     protocol (or of the paper's, for a study that does not train it) at its shifted levels."""
     rows: Rows = []
+    baselines = dict(ood.baselines)
+    if ood.matched is not None and PUBLISHED_MONOLOCO in baselines.get("pedestrians", []):
+        # as C3 and C4: Monoloco fed the DRF family's inputs (one point per level, its own dropout rate)
+        baselines["pedestrians"] = [MATCHED_MONOLOCO if b == PUBLISHED_MONOLOCO else b for b in baselines["pedestrians"]]
     for protocol, judged in ood.by_protocol():
         shift = pd.concat([rows_of(ood.curves, s, pr) for s, pr in judged], ignore_index=True)
+        if ood.matched is not None and any(s == "pedestrians" for s, _ in judged):
+            shift = pd.concat([shift, ood.matched.assign(study="pedestrians", protocol=protocol)], ignore_index=True)
         conditions = [(s, lv) for s, _ in judged for lv in ood.shifted[s]]
-        rows.append((protocol, c5_intervals_under_shift(shift, conditions, ood.baselines)))
+        rows.append((protocol, c5_intervals_under_shift(shift, conditions, baselines)))
     return rows
 
 

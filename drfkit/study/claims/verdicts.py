@@ -14,7 +14,8 @@ from drfkit.core.metrics import t975
 REPRODUCED, PARTLY, NOT = "reproduced", "partly", "not reproduced"
 NOT_TESTABLE = "not testable"  # the data cannot decide (e.g. even a perfect gate could not be told from random)
 BETTER = "better than the paper's parity"  # a parity claim (C4) where the DRF is far better, not equal
-VERDICTS = (REPRODUCED, PARTLY, NOT, NOT_TESTABLE, BETTER)
+INCONCLUSIVE = "inconclusive"  # an equivalence claim whose interval is too wide to say equal or not (C4)
+VERDICTS = (REPRODUCED, PARTLY, NOT, NOT_TESTABLE, BETTER, INCONCLUSIVE)
 
 # A PICP at or above this is saturated: the 95 % intervals cover (almost) everything, so coverage
 # cannot rank two models there, and differences in the last decimals are noise, not evidence.
@@ -133,6 +134,27 @@ def share_text(share: float, beyond: float) -> str:
     return f"{100 * share:.0f}%" + ("" if math.isnan(beyond) else f" ({100 * beyond:.0f}% beyond the seeds' intervals)")
 
 
+def collapsed_curve(sub: pd.DataFrame, model: str = "drf") -> bool:
+    """True when ``model``'s PICP–MPIW curve in ``sub`` is one point repeated over several dropout rates: its
+    intervals do not move with the rate (no dropout head, as the output-units DRF's), so a curve comparison
+    tests nothing about its MC dropout."""
+    rows = sub[sub["model"] == model]
+    return len(rows) > 1 and float(rows["mpiw"].max() - rows["mpiw"].min()) == 0.0
+
+
+def collapsed_text(sub: pd.DataFrame, base: str, model: str = "drf") -> str:
+    """What a collapsed curve's comparison reports instead: NLL and calibration error beside the baseline's
+    (seed means, at the model's own rate: its first row; the baseline's at its default rate)."""
+    def first(m):
+        rows = sub[sub["model"] == m]
+        return rows.iloc[0] if len(rows) else None
+    a, b = first(model), first(base)
+    if a is None or b is None or "nll" not in sub:
+        return "its intervals do not move with the dropout rate (no dropout head)"
+    return (f"no dropout head (one point for every rate): NLL {a['nll']:.3g} vs {b['nll']:.3g}, calibration error "
+            f"{a['cal_error']:.3f} vs {b['cal_error']:.3f}, PICP {100 * a['picp']:.0f}% vs {100 * b['picp']:.0f}%")
+
+
 def curve_verdict(shares: dict) -> str:
     """The verdict of ``CURVE_RULE`` on (share, share beyond the intervals) per comparison."""
     vals = [s for s, _ in shares.values() if not math.isnan(s)]
@@ -142,13 +164,15 @@ def curve_verdict(shares: dict) -> str:
     return (REPRODUCED if all(at_most(1.0, b) for b in beyond) else PARTLY if np.mean(vals) >= 0.5 else NOT)
 
 
-CURVE_RULE = ("reproduced: every DRF point lies above every baseline's curve at equal MPIW beyond the seeds' 95 % "
+CURVE_RULE = ("a DRF whose curve is one point for every dropout rate (no dropout head) tests nothing about MC dropout: "
+              "its comparisons are left out and reported with NLL and calibration error; "
+              "reproduced: every DRF point lies above every baseline's curve at equal MPIW beyond the seeds' 95 % "
               "intervals (DRF's lower PICP bound above the baseline's upper bound, interpolated); partly: on "
               "average at least half of the DRF points lie above in seed means; else not reproduced; a comparison "
               f"where every PICP is >= {100 * SATURATED_PICP:g}% is left out as not informative (intervals that "
               "cover everything cannot be ranked by coverage); not testable if none is left")
 
 
-__all__ = ["REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "VERDICTS", "SATURATED_PICP", "at_most",
+__all__ = ["REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
            "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
-           "curve_shares", "share_text", "curve_verdict", "CURVE_RULE"]
+           "curve_shares", "share_text", "curve_verdict", "CURVE_RULE", "collapsed_curve", "collapsed_text"]
