@@ -231,6 +231,20 @@ def test_particle_filter_recovers_a_known_trajectory():
         oracle.pendulum_particle_filter(obs[..., :1], sigma[..., :1])
 
 
+def test_the_references_calibration_grid_widens_until_its_choice_is_interior():
+    # the sigmas a model reports are 6x too small: the best scale lies beyond the starting grid (0.5 - 2)
+    rng = np.random.default_rng(0)
+    theta, _ = pend._simulate(rng.uniform(-np.pi, np.pi, 12), 30, np.random.default_rng(1))
+    truth = np.stack([np.cos(theta), np.sin(theta)], -1)
+    obs = truth + rng.normal(0.0, 0.3, truth.shape)
+    cal = oracle.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0)
+    assert cal["sigma_scale"] >= 4.0 and cal["interior"]
+    # with no room to widen, a choice at the grid's edge says so
+    edge = oracle.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0,
+                                            max_widen=0)
+    assert edge["sigma_scale"] == 2.0 and not edge["interior"]
+
+
 def test_template_matching_reads_clean_and_noisy_frames():
     theta = np.array([[-2.0, -0.5, 0.3, 1.7, 3.0]])
     clean = pend.render_pendulum(theta)

@@ -131,18 +131,35 @@ def resample_degenerate(w: np.ndarray, log_w: np.ndarray, states: tuple[np.ndarr
 
 
 def calibrate_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, targets: np.ndarray, *,
-                              sigma_scales: Iterable[float] = (1.0, 2.0, 4.0),
-                              outliers: Iterable[float] = (0.01, 0.1), n_particles: int = 200,
-                              seed: int = 0) -> dict[str, float]:
-    """The (sigma_scale, outlier) with the lowest MAE on VALIDATION estimates and targets (N, T, 2)."""
-    best = {"mae": math.inf}
-    for scale in sigma_scales:
-        for eps in outliers:
-            est = pendulum_particle_filter(obs_mean, obs_sigma, n_particles=n_particles, seed=seed,
-                                           sigma_scale=scale, outlier=eps)
-            err = float(np.abs(est - targets).mean())
-            if err < best["mae"]:
-                best = {"mae": err, "sigma_scale": float(scale), "outlier": float(eps)}
+                              sigma_scales: Iterable[float] = (0.5, 1.0, 2.0),
+                              outliers: Iterable[float] = (0.003, 0.01, 0.03), n_particles: int = 200,
+                              seed: int = 0, max_widen: int = 4) -> dict[str, float]:
+    """The (sigma_scale, outlier) with the lowest MAE on VALIDATION estimates and targets (N, T, 2), on a grid
+    widened until the choice is interior: while the best value of either sits at its grid's edge, the grid
+    grows past that edge (sigma scale halved or doubled, outlier weight divided or multiplied by 3, capped at
+    0.5), at most ``max_widen`` times. 'interior' says whether the choice ended inside both grids (a choice at
+    a corner of the grid would say the grid, not the data, chose it)."""
+    scales, outs = sorted(float(v) for v in sigma_scales), sorted(float(v) for v in outliers)
+    tried: dict[tuple[float, float], float] = {}
+    best: dict[str, Any] = {}
+    for attempt in range(max_widen + 1):
+        for scale in scales:
+            for eps in outs:
+                if (scale, eps) not in tried:
+                    est = pendulum_particle_filter(obs_mean, obs_sigma, n_particles=n_particles, seed=seed,
+                                                   sigma_scale=scale, outlier=eps)
+                    tried[(scale, eps)] = float(np.abs(est - targets).mean())
+        (scale, eps), err = min(((k, v) for k, v in tried.items() if k[0] in scales and k[1] in outs),
+                                key=lambda kv: kv[1])
+        edge_scale = scale in (scales[0], scales[-1])
+        edge_eps = eps == outs[0] or (eps == outs[-1] and eps < 0.5)
+        best = {"mae": err, "sigma_scale": scale, "outlier": eps, "interior": not (edge_scale or edge_eps)}
+        if best["interior"] or attempt == max_widen:
+            break
+        if edge_scale:
+            scales.insert(0, scale / 2.0) if scale == scales[0] else scales.append(scale * 2.0)
+        if edge_eps:
+            outs.insert(0, eps / 3.0) if eps == outs[0] else outs.append(min(eps * 3.0, 0.5))
     return best
 
 
@@ -237,7 +254,8 @@ def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.n
         per_frame_input = abs_error_per_frame(mean, arrays["targets"])
         row = {"noise": name, "mae_input": like_for_like_mae(per_frame_input, name),
                "mae": like_for_like_mae(per_frame, name), "mae_all_frames": float(per_frame.mean()),
-               "sigma_scale": cal["sigma_scale"], "outlier": cal["outlier"], "n_particles": n_particles}
+               "sigma_scale": cal["sigma_scale"], "outlier": cal["outlier"], "calibration_interior": cal["interior"],
+               "n_particles": n_particles}
         rows.append(row)
         if name == "blackout":
             curve_rows += [{"model": "physics_bound", "frame": f, "mae": float(e)} for f, e in enumerate(per_frame)]

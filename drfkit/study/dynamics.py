@@ -103,7 +103,7 @@ def physics_bound(P, no_dynamics: dict[int, Any], levels, n_particles: int = 100
         table, curves = bound_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles, seed)
         rows.append(table.assign(seed=seed))
         curve_rows.append(curves.assign(seed=seed))
-    order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "n_particles"]
+    order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "calibration_interior", "n_particles"]
     return (pd.concat(rows, ignore_index=True)[order],
             pd.concat(curve_rows, ignore_index=True)[["model", "seed", "frame", "mae"]])
 
