@@ -223,3 +223,53 @@ def test_prior_weight_is_checked_and_stays_out_of_old_names():
         TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0, prior_weight=-1.0)
     assert "prior_weight" not in naming_fields(TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0))
     assert naming_fields(TrainConfig(epochs=1, lr=1e-3, batch_size=2, seed=0, prior_weight=1.0))["prior_weight"] == 1.0
+
+
+def _term_grads(model, **weights):
+    """The gradient that one loss term adds, per parameter name: grad(loss with the term) - grad(without it)."""
+    from drfkit.methods.objectives import batch_loss
+
+    torch.manual_seed(0)
+    x = torch.randint(0, 256, (2, 6, 24, 24), dtype=torch.uint8, generator=torch.Generator().manual_seed(1))
+    y = torch.randn(2, 6, 2) * 0.5
+
+    def grads(**w):
+        model.zero_grad()
+        torch.manual_seed(2)  # the same dropout masks in both passes
+        batch_loss(model, "beta_nll", 1.0, x, y, **w).backward()
+        return {n: (p.grad.clone() if p.grad is not None else torch.zeros_like(p)) for n, p in model.named_parameters()}
+    with_term, without = grads(**weights), grads(**{k: 0.0 for k in weights})
+    return {n: (with_term[n] - without[n]).abs().sum().item() for n in with_term}
+
+
+def test_the_observation_loss_reaches_the_observation_variance_head():
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2, latent=4))
+    added = _term_grads(model, obs_weight=1.0)
+    assert added["heads.linear2.weight"] > 0 and added["heads.linear2.bias"] > 0      # r is trained by it
+    assert all(v == 0 for n, v in added.items() if n.startswith("transition."))       # the filter is not read
+
+
+def test_the_prior_loss_reaches_the_transition():
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2, latent=4))
+    added = _term_grads(model, prior_weight=1.0)
+    assert added["transition.head.weight"] > 0 and added["transition.cell1.weight_ih"] > 0
+
+
+def test_a_regulariser_reaches_its_own_parameters_only():
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    model = build_model(default_config("known_dynamics", "pendulum", 2, transition="learned", learn_q=True, pull=10.0))
+    with torch.no_grad():
+        model.learned.outer.weight.normal_(0, 0.1)      # away from zero, so that the pull has a gradient
+    model.zero_grad()
+    model.regulariser().backward()
+    reached = {n for n, p in model.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
+    assert reached and all(n.startswith("learned.") for n in reached)
+    assert "learned.outer.weight" in reached

@@ -78,3 +78,39 @@ def test_filter_on_pixels_beats_every_frame_alone_and_coasts():
     err_frame = np.abs(per_frame - d["targets"]).mean(axis=(0, 2))
     assert err_pf[20:30].mean() < 0.25 < err_frame[20:30].mean()   # the state coasts where a frame alone knows nothing
     assert err_pf[:20].mean() < 0.01 and err_frame[:20].mean() < 0.02
+
+
+def test_every_clean_value_at_every_level_gives_a_distribution_over_the_256_values():
+    k = torch.arange(256, dtype=torch.float64)[:, None, None]          # (256, 1, 1)
+    c = torch.arange(256, dtype=torch.float64)[None, :, None]          # (1, 256, 1)
+    levels = torch.tensor([0.0, 1 / 255, 0.01, 0.1, 0.25, 0.5, 0.75, 0.99, 1.0], dtype=torch.float64)
+    p = pb.pixel_log_prob(k, c, levels[None, None, :]).exp()           # (256 k, 256 c, L)
+    floor = 2 * pb.FLOOR / torch.clamp(255 * levels, min=1.0)
+    mass = torch.where(p > floor, p, torch.zeros_like(p)).sum(0)       # (256 c, L): the floor is not mass
+    assert torch.allclose(mass, torch.ones_like(mass), atol=1e-9)
+    # and the mass sits where the blend can put it: [(1 - l) c, (1 - l) c + 255 l], rounded
+    lo, hi = (1 - levels) * c[0] - 0.5, (1 - levels) * c[0] + 255 * levels + 0.5   # (256, L)
+    inside = (k >= torch.floor(lo)) & (k <= torch.ceil(hi))
+    assert torch.all(torch.where(inside, torch.zeros_like(p), p) <= floor)
+
+
+def test_the_per_frame_posterior_mean_is_the_brute_force_sum_over_angles():
+    # uniform angles: every angle of a fine grid draws an image, weighs it by the frame's exact likelihood;
+    # the bank's images weighted by their arcs must give the same posterior mean
+    from drfkit.data.pendulum import render_pendulum
+
+    rng = np.random.default_rng(7)
+    theta_true = rng.uniform(-np.pi, np.pi, 3)
+    clean = render_pendulum(theta_true[:, None])[:, 0]                  # (3, 24, 24)
+    levels = np.array([0.2, 0.5, 0.8])
+    frames = blend_uniform_noise(clean, levels, rng)
+    angles = -np.pi + 2 * np.pi * (np.arange(16384) + 0.5) / 16384
+    images = torch.from_numpy(render_pendulum(angles[:, None])[:, 0].reshape(len(angles), -1).astype(np.float64))
+    x = torch.from_numpy(frames.reshape(3, 1, -1).astype(np.float64))
+    brute = []
+    for i in range(3):
+        ll = pb.pixel_log_prob(x[i], images, torch.tensor(levels[i], dtype=torch.float64)).sum(-1)   # (A,)
+        w = torch.softmax(ll, 0).numpy()
+        brute.append([w @ np.cos(angles), w @ np.sin(angles)])
+    fast = pb.per_frame_bayes(frames, levels)
+    assert np.abs(fast - np.array(brute)).max() < 2e-3
