@@ -76,3 +76,61 @@ def test_the_round2_table_in_docs_is_the_rows_on_disk():
         quoted = text.split(f"<!-- {tag}:start -->\n", 1)[1].split(f"\n<!-- {tag}:end -->", 1)[0].strip()
         mine = rows[rows["variant"].isin(list(variants))]
         assert quoted == ablation.summary_markdown(summarise_ablation(mine)).strip(), tag
+
+
+# ------------------------------------------------------------------------------ orderings and verdicts in prose
+def _readme():
+    return (REPO_ROOT / "README.md").read_text()
+
+
+def _verdict(claim, protocol):
+    t = pd.read_csv(REPO_ROOT / "results" / "paper" / "claims.csv")
+    return t.loc[(t["id"] == claim) & (t["protocol"] == protocol), "verdict"].iloc[0]
+
+
+# (a phrase of the README's conclusions, the claim rows whose verdicts it states)
+README_VERDICTS = [
+    ("(C1, F1, F2 not\n  reproduced)", [("C1", "book", "not reproduced"), ("F1", "book", "not reproduced"),
+                                       ("F2", "book", "not reproduced")]),
+    ("(C4\n  inconclusive under both protocols", [("C4", "paper", "inconclusive"), ("C4", "book", "inconclusive")]),
+    ("(C3 not reproduced)", [("C3", "paper", "not reproduced"), ("C3", "book", "not reproduced")]),
+    ("(C7a partly", [("C7a", "paper", "partly")]),
+    ("(C7b reproduced)", [("C7b", "paper", "reproduced"), ("C7b", "book", "reproduced")]),
+    ("(C6 reproduced)", [("C6", "paper", "reproduced")]),
+]
+
+
+@pytest.mark.parametrize("phrase,rows", README_VERDICTS)
+def test_the_readmes_conclusions_state_the_committed_verdicts(phrase, rows):
+    assert phrase in _readme(), f"the README no longer says {phrase!r}: update README_VERDICTS with the prose"
+    for claim, protocol, verdict in rows:
+        assert _verdict(claim, protocol) == verdict, (claim, protocol)
+
+
+def test_the_readmes_orderings_are_the_tables():
+    text = _readme()
+    # "at 0.75 it is about twice as far off as no_dynamics" (the book protocol's committed DRF)
+    assert "at 0.75 it is about\n  twice as far off as no_dynamics" in text or "at 0.75 it is about twice as far off as no_dynamics" in text
+    assert 1.6 <= _book("drf", "mae_0.75") / _book("no_dynamics", "mae_0.75") <= 2.4
+    # "a gain is one on clean and pure-noise frames alike"
+    assert abs(_book("drf", "gain_ratio_blackout") - 1.0) < 0.05 and _book("drf", "gain_clean") > 0.95
+    # "by a fifth of the paper's effect" (C7a, paper protocol)
+    c7a = pd.read_csv(REPO_ROOT / "results" / "paper" / "claims.csv").set_index(["id", "protocol"]).loc[("C7a", "paper"), "ours"]
+    share = float(re.search(r"coverage [+-][0-9.]+ pt, ([0-9]+)% of the paper's", c7a).group(1)) / 100
+    assert 0.1 <= share <= 0.3 and "by a fifth of the paper's effect" in text.replace("\n  ", " ")
+
+
+def test_the_regime_paragraph_states_only_what_its_summary_table_shows():
+    """docs/dynamics.md draws no conclusion from the one-seed regime map and describes it as the table is."""
+    text = (REPO_ROOT / "docs" / "dynamics.md").read_text()
+    assert "one seed on the `fit` budget, no intervals, so the book draws no conclusion from it" in text
+    t = _table("pendulum_regime_summary.csv")
+    row = t[t["train_noise"] == 0.5].set_index("test")
+    graded = row.drop(index=["blackout", "after_blackout"])
+    # "the DRF is less accurate than no_dynamics at every test level, including 0.75 and 1.0"
+    assert (graded["drf_over_no_dynamics"] > 1).all()
+    # "through the blackout it is no better than no_dynamics"
+    assert row.loc["blackout", "drf"] >= row.loc["blackout", "no_dynamics"]
+    # "the known-dynamics filter and the particle filter on no_dynamics' outputs are the only models that coast"
+    coast = {m for m in ("drf", "no_dynamics", "lstm", "known_dynamics", "physics_bound") if row.loc["blackout", m] <= 0.10}
+    assert coast == {"known_dynamics", "physics_bound"}

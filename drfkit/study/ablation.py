@@ -31,13 +31,13 @@ from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, TRAINING_BLACKOUT_SEED_OF
 from drfkit.util.io import atomic_write_json, param_hash
 from drfkit.util.paths import results_root
 from drfkit.methods.protocols import ABLATION_BUDGETS as BUDGETS
-from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, VARIANTS, summarise_ablation, variant_spec
+from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS, VARIANTS, summarise_ablation, variant_spec
 from drfkit.methods.train import SequenceData, TrainConfig, load_checkpoint, train_model
 
 DATA_SEED = 1000  # the profiles' pend_data_seed: train = seed, val = seed + 1 (test, seed + 2, is never read)
 
 EVAL_LEVELS = (0.5, 0.75, 1.0)
-ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS}
+ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS, 4: ROUND4_VARIANTS}
 # fresh trajectories (the encoder probe): seeds far from every split's (data seed + 0, 1, 2)
 FRESH_MOTION_SEED = 10_000_000
 

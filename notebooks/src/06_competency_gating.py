@@ -39,7 +39,8 @@
 # best any competency score could pick; it reads the targets, so it is compared, never run or timed.
 # Only the DRF has a filter, hence gains: the table covers the DRF models of every seed, of every
 # training protocol of each study (`pend_protocols`, `ped_protocols`; `drfkit.methods.protocols`; notebook
-# 01 checks that the pendulum book protocol's gain follows frame quality, which is what the gate reads).
+# 02 measures whether each filter's gain follows frame quality, which is what the gate reads: its
+# mechanism checks and its dissection).
 #
 # **Gated inference is real.** The features (encoder and filter) run once; the head runs with
 # `n_samples` dropout samples on the gathered selected frames and once on the rest; results are
