@@ -12,7 +12,18 @@ text) -> ``book`` (notebook start-up, the pipeline, the grid, the manifest, the 
 
 ``python -m drfkit`` lists the commands.
 """
-from drfkit.methods.train import load_checkpoint
+from __future__ import annotations
+
+from typing import Any
 
 __version__ = "0.1.0"
 __all__ = ["load_checkpoint", "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    """``drfkit.load_checkpoint`` on first use: importing drfkit (or ``python -m drfkit --help``) loads no
+    torch (``tests/test_structure.py`` checks it)."""
+    if name == "load_checkpoint":
+        from drfkit.methods.train import load_checkpoint
+        return load_checkpoint
+    raise AttributeError(f"module 'drfkit' has no attribute {name!r}")

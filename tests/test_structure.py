@@ -8,6 +8,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 from drfkit.util.paths import REPO_ROOT
 
 PACKAGE = REPO_ROOT / "drfkit"
@@ -295,3 +297,24 @@ def test_no_private_name_is_imported_from_another_package():
                 crossing += [f"{importer} imports {node.module}.{a.name}" for a in node.names
                              if a.name.startswith("_") and not a.name.startswith("__")]
     assert not crossing, "\n".join(crossing)
+
+
+def test_the_package_face_is_light_importing_drfkit_or_its_util_or_the_command_list_loads_no_torch():
+    """``import drfkit``, ``drfkit.util`` (and its paths, registry), ``drfkit.cli`` and ``python -m drfkit --help``
+    load neither torch nor numpy nor pandas: a command's help and a path lookup answer at once."""
+    import subprocess
+    import sys
+
+    code = ("import sys, drfkit, drfkit.util, drfkit.util.paths, drfkit.util.registry, drfkit.cli\n"
+            "from drfkit.cli import main\n"
+            "import contextlib, io\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    main(['--help'])\n"
+            "heavy = sorted(m for m in ('torch', 'numpy', 'pandas') if m in sys.modules)\n"
+            "print(','.join(heavy))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"the light face loads {out.stdout.strip()}"
+    import drfkit
+    assert callable(drfkit.load_checkpoint)            # still there, on first use
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        drfkit.nope  # noqa: B018
