@@ -163,3 +163,14 @@ def test_mechanism_targets_use_the_claims_thresholds_at_their_boundaries():
     table = ablation.mechanism_targets(pd.DataFrame([row, noise1, one_seed]))
     assert table["variant"].tolist() == ["fit_book"]  # trained at 0.5, with two seeds
     assert table.iloc[0][["r_follows_noise", "gain_drops", "f_predicts", "coasts"]].tolist() == [True, True, False, True]
+
+
+def test_the_pendulum_test_split_has_its_own_seed(tmp_path, monkeypatch):
+    P = quick(tmp_path, monkeypatch)
+    assert studies.split_seed(P, "test") == P.pendulum.test_seed != P.pendulum.data_seed + 2
+    assert studies.split_seed(P, "val") == P.pendulum.data_seed + 1 and studies.split_seed(P, "train") == P.pendulum.data_seed
+    test, val = studies.pendulum_split(P, "test"), studies.pendulum_split(P, "val")
+    assert not np.array_equal(test["clean"][:, 0], val["clean"][:, 0])
+    clash = quick(tmp_path, monkeypatch, pend_test_seed=P.pendulum.data_seed + 1)
+    with pytest.raises(ValueError, match="pend_test_seed .* validation split's seed"):
+        studies.pendulum_split(clash, "test")

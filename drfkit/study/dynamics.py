@@ -38,7 +38,7 @@ from drfkit.util.progress import steps
 def blackout_split(P, split: str) -> dict[str, np.ndarray]:
     """A pendulum split at the training noise with its ``blackout_frames`` pure noise."""
     arrays = studies.pendulum_split(P, split)
-    seed = P.pendulum.data_seed + studies.SPLIT_SEED_OFFSET[split] + BLACKOUT_SEED_OFFSET
+    seed = studies.split_seed(P, split) + BLACKOUT_SEED_OFFSET
     return with_blackout(arrays, *blackout_frames(arrays["images"].shape[1]), seed=seed)
 
 

@@ -31,7 +31,8 @@ from drfkit.util.paths import PARAMS_DIR
 
 _COMMON = ["profile", "seeds", "device", "threads"]
 _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
-              "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed"]
+              "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed",
+              "pend_test_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
                "pend_book_models", "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
 _DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "ablation_round2_budget",

@@ -15,7 +15,8 @@ from drfkit.methods.run_config import TrainConfig
 from drfkit.study.entry import Study
 from drfkit.util.paths import data_dir
 
-# data sets are fixed by ``*_data_seed`` (train = seed, val = seed + 1, test = seed + 2), the same for
+# data sets are fixed by ``*_data_seed`` (train = seed, val = seed + 1; the pendulum's test split by its own
+# ``test_seed``, the pedestrians' test = seed + 2), the same for
 # every model seed; each seed in ``P.seeds`` changes a model's initialisation, batch order and dropout
 SPLIT_SEED_OFFSET = {"train": 0, "val": 1, "test": 2}
 # what the profile owns of a schedule; a variant's ``train`` recipe (``drfkit.methods.protocols``) sets the rest
@@ -28,11 +29,22 @@ def _noise(P, noise: Noise | float | None) -> Noise:
     return noise if isinstance(noise, Noise) else PENDULUM.noise(noise, P)
 
 
+def split_seed(P, split: str) -> int:
+    """The seed of a pendulum split: ``data_seed`` + 0 / 1 for train / val; the test split has its own
+    ``test_seed``, so that a fresh one gives a test set no training or selection step has read."""
+    if split == "test":
+        seed = int(P.pendulum.test_seed)
+        if seed in (P.pendulum.data_seed, P.pendulum.data_seed + 1):
+            raise ValueError(f"pend_test_seed {seed} is the training or validation split's seed (data_seed "
+                             f"{P.pendulum.data_seed} and + 1): the test set would repeat them; pick another")
+        return seed
+    return P.pendulum.data_seed + SPLIT_SEED_OFFSET[split]
+
+
 def pendulum_split(P, split: str, noise: Noise | float | None = None) -> dict[str, Any]:
     """Arrays of a pendulum split; ``noise`` a ``Noise`` or its max noise level (default: the training noise)."""
     n = {"train": P.pendulum.train_sequences, "val": P.pendulum.val_sequences, "test": P.pendulum.test_sequences}[split]
-    return load_pendulum(data_dir(P.profile), split, n, P.pendulum.seq_len, _noise(P, noise),
-                         P.pendulum.data_seed + SPLIT_SEED_OFFSET[split])
+    return load_pendulum(data_dir(P.profile), split, n, P.pendulum.seq_len, _noise(P, noise), split_seed(P, split))
 
 
 def pendulum_data(P, split: str, noise: Noise | float | None = None, protocol: str = "paper") -> SequenceData:
@@ -125,6 +137,6 @@ PENDULUM = Study(
     fresh_training=pendulum_fresh_training, gating_claim="C7a", noise_name="max noise",
     target_unit="(cos θ, sin θ)")
 
-__all__ = ["PENDULUM", "PROFILE_SCHEDULE", "SPLIT_SEED_OFFSET", "pendulum_data", "pendulum_data_key",
+__all__ = ["PENDULUM", "PROFILE_SCHEDULE", "SPLIT_SEED_OFFSET", "split_seed", "pendulum_data", "pendulum_data_key",
            "pendulum_fresh_training", "pendulum_model_options", "pendulum_split", "pendulum_train_config",
            "recipe_fields"]

@@ -100,6 +100,8 @@ SCHEMA = Section("", {
         "eval_max_noise": Spec(list[float], _LEVELS, _levels),
         "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
         "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
+        "test_seed": Spec(int, "an integer >= 0, neither data_seed nor data_seed + 1", lambda v: v >= 0,
+                          "the test split's own seed: a fresh one makes a test set no selection step has read"),
         "models": Spec(list[str], "a non-empty subset of {options}", _nonempty, registry="kinds"),
         "epochs": Spec(int, *_POSITIVE),
         "batch_size": Spec(int, *_POSITIVE),

@@ -26,7 +26,7 @@ from drfkit.methods.train import (SequenceData, TrainConfig, TrainResult, finish
                                   train_model)
 # each study's data, as notebooks ask for it
 from drfkit.study.pedestrian_runs import pedestrian_data, pedestrian_records, pedestrian_split, target_statistics
-from drfkit.study.pendulum_runs import SPLIT_SEED_OFFSET, pendulum_data, pendulum_split
+from drfkit.study.pendulum_runs import SPLIT_SEED_OFFSET, pendulum_data, pendulum_split, split_seed
 
 
 # ---------------------------------------------------------------------------- training
