@@ -229,3 +229,15 @@ def test_other_bad_inputs_raise():
         mae(np.array([0.0, np.nan]), np.zeros(2))
     with pytest.raises(TypeError, match="numpy array, torch tensor or number"):
         mae("abc", 0.0)
+
+
+def test_the_bootstrap_interval_covers_the_mean_and_narrows_with_more_units():
+    from drfkit.core.metrics import bootstrap_interval
+    rng = np.random.default_rng(0)
+    small, large = rng.normal(1.0, 1.0, 20), rng.normal(1.0, 1.0, 2000)
+    lo, hi = bootstrap_interval(small)
+    assert lo < small.mean() < hi
+    lo2, hi2 = bootstrap_interval(large)
+    assert lo2 < 1.0 < hi2 and (hi2 - lo2) < (hi - lo) / 5
+    assert (hi2 - lo2) == pytest.approx(2 * 1.96 / np.sqrt(2000), rel=0.15)  # the normal theory's width
+    assert np.isnan(bootstrap_interval([1.0])[0])

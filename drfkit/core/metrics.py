@@ -30,7 +30,7 @@ import torch
 __all__ = [
     "normal_cdf", "normal_ppf", "gaussian_interval", "mae", "picp", "mpiw", "gaussian_nll",
     "crps_gaussian", "interval_score", "calibration_curve", "calibration_error",
-    "DEFAULT_CALIBRATION_LEVELS", "rank_correlation", "t975", "prediction_metrics",
+    "DEFAULT_CALIBRATION_LEVELS", "rank_correlation", "t975", "prediction_metrics", "bootstrap_interval",
 ]
 
 # 0.05, 0.10, ..., 0.95 (19 levels)
@@ -264,6 +264,18 @@ def rank_correlation(x, y) -> float:
 # Two-sided 95 % Student-t quantiles t_{0.975, df}; beyond df = 30 the normal value.
 _T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
          10: 2.228, 12: 2.179, 15: 2.131, 20: 2.086, 25: 2.060, 30: 2.042}
+
+
+def bootstrap_interval(per_unit, level: float = 0.95, n_boot: int = 2000, seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of ``per_unit`` (N,) values (one per independent unit: a
+    sequence), resampling the units with replacement ``n_boot`` times from ``seed``."""
+    x = np.asarray(per_unit, dtype=np.float64).ravel()
+    if x.size < 2:
+        return math.nan, math.nan
+    _check_level("level", level)
+    idx = np.random.default_rng(seed).integers(0, x.size, size=(n_boot, x.size))
+    means = x[idx].mean(axis=1)
+    return float(np.quantile(means, (1 - level) / 2)), float(np.quantile(means, (1 + level) / 2))
 
 
 def t975(df: int) -> float:
