@@ -200,3 +200,11 @@ def test_dynamics_probes_a_trained_drf_and_names_the_command_for_a_missing_one(t
     assert cli(["dynamics", *args, "--level", "0.5"]) == 0
     out = capsys.readouterr().out
     assert "drf seed 0: epoch 1" in out and "r_noise_spearman" in out and "gain_ratio" in out, out
+    # the dissection of the same run, written where asked
+    table = tmp_path / "dissection.csv"
+    assert cli(["dynamics", *args, "--level", "0.5", "--dissect", "--csv", str(table)]) == 0
+    out = capsys.readouterr().out
+    assert "e2_over_p" in out and "mae_blackout_clamped" in out
+    import pandas as pd
+    row = pd.read_csv(table).iloc[0]
+    assert row["model"] == "drf" and row["failure"] == "not measured"   # no no_dynamics named: no yardstick

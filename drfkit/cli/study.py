@@ -126,12 +126,12 @@ def ablation(argv: list[str]) -> int:
 
 
 def dynamics(argv: list[str]) -> int:
-    """``python -m drfkit dynamics --profile paper --protocol book --models drf --seeds 0 [--last]``
+    """``python -m drfkit dynamics --profile paper --protocol book --models drf --seeds 0 [--last] [--dissect]``
 
     Prints the mechanism checks (rank correlation of r with the frame's noise, gains on clean and
     pure-noise frames, prediction ratio) and the blackout MAE of trained pendulum runs on the
     validation split, from their selected checkpoints or (``--last``) the last epoch of a run
-    still training.
+    still training; ``--dissect`` adds the dissection (``drfkit.study.dissection.dissect_filters``).
     """
     import pandas as pd
 
@@ -149,6 +149,10 @@ def dynamics(argv: list[str]) -> int:
     ap.add_argument("--level", type=float, default=0.75, help="max noise of the mechanism checks")
     ap.add_argument("--split", default="val", choices=["val", "test"])
     ap.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
+    ap.add_argument("--dissect", action="store_true",
+                    help="also the dissection (drfkit.study.dissection): variances against their errors per noise "
+                         "level and the interventions; name no_dynamics among --models for the verdict's yardstick")
+    ap.add_argument("--csv", default=None, help="with --dissect: write the interventions table here")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
     P = for_command("02_pendulum_dynamics", args.profile)
@@ -166,7 +170,19 @@ def dynamics(argv: list[str]) -> int:
             models[(kind, seed)] = load_latest(stem) if args.last else load_checkpoint(f"{stem}-best.pt")
             print(f"{kind} seed {seed}: epoch {models[(kind, seed)].checkpoint_meta.get('epoch')}")
     with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
-        print(probe(P, models, args.level, args.split).to_string(index=False))
+        filters = {k: m for k, m in models.items() if hasattr(m, "filter_diagnostics")}
+        if filters:
+            print(probe(P, filters, args.level, args.split).to_string(index=False))
+        if args.dissect:
+            from drfkit.study.dissection import calibration_summary, dissect_filters
+            from drfkit.util.io import atomic_write_csv
+
+            calibration, interventions = dissect_filters(P, models, split=args.split, fit_split="val")
+            if len(calibration):
+                print(calibration_summary(calibration).to_string())
+            print(interventions.to_string(index=False))
+            if args.csv:
+                atomic_write_csv(args.csv, interventions)
     return 0
 
 
