@@ -134,3 +134,18 @@ def test_the_regime_paragraph_states_only_what_its_summary_table_shows():
     # "the known-dynamics filter and the particle filter on no_dynamics' outputs are the only models that coast"
     coast = {m for m in ("drf", "no_dynamics", "lstm", "known_dynamics", "physics_bound") if row.loc["blackout", m] <= 0.10}
     assert coast == {"known_dynamics", "physics_bound"}
+
+
+def test_the_calibrated_gain_screen_in_docs_is_its_committed_table():
+    """docs/dynamics.md quotes the screen's MAEs and gain slopes and names its choice: the table must say the same,
+    and the book protocol must train the variant the rule chose."""
+    from drfkit.methods.protocols import PROTOCOLS
+
+    text = (REPO_ROOT / "docs" / "dynamics.md").read_text().replace("\n", " ")
+    t = _table("pendulum_calibrated_screen.csv").set_index("variant")
+    chosen = t.index[t["chosen"]].tolist()
+    assert chosen == [PROTOCOLS["book"]["drf_calibrated"]] and f"the tie goes to `{chosen[0]}`" in text
+    maes = re.search(r"validation MAEs tie within 5 % \(([0-9.]+) and ([0-9.]+)\)", text).groups()
+    assert [float(m) for m in maes] == [round(t.loc[v, "mae"], 4) for v in ("fit_calibrated_wide", "fit_calibrated_prior_wide")]
+    slopes = re.search(r"slope −([0-9.]+) against −([0-9.]+) per unit", text).groups()
+    assert [-float(v) for v in slopes] == [round(t.loc[v, "gain_slope"], 2) for v in ("fit_calibrated_prior_wide", "fit_calibrated_wide")]
