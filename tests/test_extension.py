@@ -366,3 +366,37 @@ def test_a_study_is_judged_by_the_gating_claim_its_entry_names(monkeypatch, tmp_
         with pytest.raises(ValueError, match="no gating claim on 'pendulum_again'"):
             claims.c7_gating(pd.DataFrame(rows), "pendulum_again")
     assert "'toy_protocol'" not in allowed_text("pend_protocols")
+
+
+def test_an_extension_reaches_the_command_line_and_a_notebooks_start_up(tmp_path):
+    """The book's own paths load ``DRFKIT_EXTENSIONS``: ``python -m drfkit train`` trains a model kind that only an
+    extension file registers, and a notebook's start-up (``start_notebook``, as make reproduce runs it) accepts its
+    parameters and evaluates it into the study's table rows."""
+    import os
+    import subprocess
+    import sys
+
+    from drfkit.study.params import load_profile, write_profile
+    from drfkit.util.registry import ENV
+
+    ext = extension_file(tmp_path, "toy_model", TOY_MODEL)
+    profile = tmp_path / "tiny.yaml"
+    write_profile(profile, load_profile("quick") | PEND_TINY | {"pend_models": ["drf", "toy"]})
+    env = {**os.environ, ENV: str(ext), "DRF_RESULTS": str(tmp_path / "results"), "OMP_NUM_THREADS": "1"}
+    run = subprocess.run([sys.executable, "-m", "drfkit", "train", "--profile", str(profile), "--study", "pendulum",
+                          "--models", "toy", "--seeds", "0", "--threads", "1"], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert list((tmp_path / "results" / "tiny" / "models").glob("pendulum-toy-seed0-*-best.pt"))
+    code = f"""
+from drfkit.study.params import _key_set, load_profile
+from drfkit.book.runtime import start_notebook
+from drfkit.study import studies
+from drfkit.study.evaluate import evaluate_study
+values = load_profile({str(profile)!r})  # what papermill injects into the parameters cell, unchecked
+P, timer = start_notebook("04_ood_noise_evaluation", {{k: values[k] for k in _key_set("04_ood_noise_evaluation")}})
+rows = evaluate_study(P, "pendulum", [0.75], models={{k: m for k, m in studies.trained_models(P, "pendulum").items()}})
+print(sorted(set(rows["model"])))
+"""
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "['drf', 'toy']" in run.stdout

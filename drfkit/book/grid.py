@@ -131,6 +131,9 @@ def train_run(train_models: Callable, notebook: str, values: dict[str, Any], run
               results_root: str) -> dict[str, Any]:
     """The task: one run, exactly as the sequential ``python -m drfkit train`` trains it
     (``train_models``: ``drfkit.study.studies.train_models``; ``notebook``: the study's training notebook)."""
+    from drfkit.util.registry import load_extensions
+
+    load_extensions()  # a Dask worker is a process of its own: it loads the extension files the parent named
     from drfkit.util.device import setup
 
     previous = os.environ.get("DRF_RESULTS")

@@ -22,6 +22,9 @@ def start_notebook(notebook: str, namespace: dict[str, Any]) -> tuple[Profile, N
     cell calls. Deterministic algorithms are requested so that a seed fixes the result
     on CPU.
     """
+    from drfkit.util.registry import load_extensions
+
+    load_extensions()  # DRFKIT_EXTENSIONS (inherited from make reproduce): the parameters may name what they add
     params = validate(notebook, notebook_globals(namespace))
     setup(params.threads, params.seeds[0], params.device)
     hold_profile(params.profile)

@@ -69,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     if name not in COMMANDS:
         print(f"unknown command {name!r}\n\n{usage()}", file=sys.stderr)
         return 2
+    from drfkit.util.registry import load_extensions
+
+    load_extensions()  # DRFKIT_EXTENSIONS: every command sees the models, noise kinds, studies and claims they add
     return command(name)(rest)
 
 
