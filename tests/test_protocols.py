@@ -174,3 +174,39 @@ def test_the_pendulum_test_split_has_its_own_seed(tmp_path, monkeypatch):
     clash = quick(tmp_path, monkeypatch, pend_test_seed=P.pendulum.data_seed + 1)
     with pytest.raises(ValueError, match="pend_test_seed .* validation split's seed"):
         studies.pendulum_split(clash, "test")
+
+
+def test_the_variants_are_data_and_every_committed_ablation_row_is_still_current():
+    """params/protocols.yaml holds every variant; resolved, each names the same runs as before it moved there:
+    every committed row of the protocol ablation (whose key hashes its variant's spec) is current."""
+    from drfkit.util.paths import REPO_ROOT
+
+    assert set(VARIANTS) >= {"paper", "fit_paper_wide", "fit_calibrated_prior_wide", "fit_known_dynamics_wide"}
+    assert variant_spec("fit_prior_split_book")["train"] == FIT_THE_MEAN | {"prior_weight": 1.0}
+    assert variant_spec("book")["blackouts"] == {"fraction": 0.5, "lengths": (5, 20)}
+    # the fit budget's rows, and the small budget's that notebook 02 reads (its other rows were made on the first
+    # generator's frames and were stale before the variants moved)
+    for budget, variants in (("fit", list(VARIANTS)), ("small", ["paper", "book", "no_dynamics_book", "lstm_book"])):
+        table = ablation.ablation_table(budget, REPO_ROOT / "results" / "paper" / "ablation")
+        known = table[table["variant"].isin(variants)]
+        assert len(known) and known["current"].all(), known.loc[~known["current"], ["variant", "seed"]]
+
+
+@pytest.mark.parametrize("entry,message", [
+    ("x: {kind: drf, model: nope}", "unknown part 'nope'"),
+    ("x: {kind: drf, colour: red}", r"fields \['colour'\] unknown"),
+    ("x: {model: wide}", "'kind' missing"),
+    ("x: {kind: drf, train: [fit_the_mean, {epochs: 3}]}", r"recipe fields \['epochs'\] unknown"),
+    ("x: {kind: drf, train_max_noise: 1.5}", r"train_max_noise must lie in \[0, 1\]"),
+    ("x: {kind: drf, blackouts: {fraction: 0.5}}", "blackouts need 'fraction' and 'lengths'"),
+])
+def test_a_bad_recipe_file_is_refused_with_what_to_fix(tmp_path, entry, message):
+    from drfkit.methods.protocols import load_variants
+
+    path = tmp_path / "protocols.yaml"
+    path.write_text("parts:\n  wide: {encoder_channels: 32}\n  fit_the_mean: {objective: beta_nll}\nrounds:\n  1:\n    "
+                    + entry + "\n")
+    with pytest.raises(ValueError, match=message):
+        load_variants(path)
+    with pytest.raises(FileNotFoundError, match="restore it from git"):
+        load_variants(tmp_path / "missing.yaml")

@@ -17,131 +17,94 @@ the same way; each kind's class names its variants (``drfkit.models.spec.ModelSp
   reference that splits the distance to the limit into what the encoder and what a learned transition
   lose. (The second round's choice, with training blackouts, was the book's protocol before.)
 
-Every variant stays listed, whether it helped or not: the ablation table shows them all.
+Every variant stays listed, whether it helped or not: the ablation table shows them all. The variants and
+the parts they are made of (recipes, model options, corruptions) are data, in ``params/protocols.yaml``: the one
+place a researcher edits or adds a recipe; ``load_variants`` reads and checks it.
 """
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drfkit.models.kinds import MODEL_CLASSES, model_spec
+from drfkit.util.paths import PARAMS_DIR
 
 if TYPE_CHECKING:
     import pandas as pd
 
-BLACKOUT_TRAINING = {"fraction": 0.5, "lengths": (5, 20)}
-BOOK_DRF = {"transition_kind": "basis", "memory_dims": 15, "noise_head": "log"}
+# the variants and their parts: params/protocols.yaml (the one place a recipe is edited), read and checked here
+VARIANT_FIELDS = ("kind", "model", "train", "blackouts", "train_max_noise")
+# what a recipe may set: TrainConfig's fields the profile does not own, and the data's business
+RECIPE_FIELDS = ("objective", "beta", "lr_schedule", "window", "batch_size", "select_on", "prior_weight", "obs_weight",
+                 "mse_warmup", "weight_decay", "grad_clip", "lr_step", "lr_gamma", "fresh_noise", "fresh_motion")
 
-VARIANTS: dict[str, dict[str, Any]] = {
-    "paper": {"kind": "drf"},
-    "log_r": {"kind": "drf", "model": {"noise_head": "log"}},
-    "basis": {"kind": "drf", "model": {"transition_kind": "basis"}},
-    "memory": {"kind": "drf", "model": {"memory_dims": 15}},
-    "blackout": {"kind": "drf", "blackouts": BLACKOUT_TRAINING},
-    "basis_memory_log": {"kind": "drf", "model": BOOK_DRF},
-    "lstm_memory_log_blackout": {"kind": "drf", "model": {"memory_dims": 15, "noise_head": "log"},
-                                 "blackouts": BLACKOUT_TRAINING},
-    "book": {"kind": "drf", "model": BOOK_DRF, "blackouts": BLACKOUT_TRAINING},
-    "book_noise1": {"kind": "drf", "model": BOOK_DRF, "train_max_noise": 1.0},
-    "no_dynamics_paper": {"kind": "no_dynamics"},
-    "lstm_paper": {"kind": "lstm"},
-    "no_dynamics_book": {"kind": "no_dynamics", "model": {"noise_head": "log"}, "blackouts": BLACKOUT_TRAINING},
-    "lstm_book": {"kind": "lstm", "model": {"noise_head": "log"}, "blackouts": BLACKOUT_TRAINING},
-}
 
-# The ablation's second round: how the models are FIT (``drfkit.methods.objectives``, ``drfkit.methods.train``),
-# not what they are. Under the paper's Gaussian NLL on one fixed noise draw the validation MAE of
-# every model doubles while the training NLL falls (the mean is starved where sigma is small);
-# ``FIT_THE_MEAN`` is the recipe that fits it: beta-NLL (beta = 1), noise redrawn on the clean frames
-# every epoch, cosine decay of the learning rate, random 25-frame windows, the checkpoint selected on
-# the validation MAE of the mean. The ``fit_*`` variants vary one lever of it at a time.
-FIT_THE_MEAN = {"objective": "beta_nll", "beta": 1.0, "lr_schedule": "cosine", "fresh_noise": True,
-                "window": 25, "batch_size": 16, "select_on": "l1"}
-_FIT_NLL = FIT_THE_MEAN | {"objective": "nll"}
-_FIT_STAGED = FIT_THE_MEAN | {"objective": "nll", "mse_warmup": "half"}  # MSE for half the epochs, then NLL
-_FIT_PRIOR = FIT_THE_MEAN | {"prior_weight": 1.0}  # the one-step prior fitted with the same weight as the posterior
-ROUND2_VARIANTS = {
-    "fit_paper": {"kind": "drf", "train": FIT_THE_MEAN},
-    "fit_paper_blackout": {"kind": "drf", "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
-    "fit_book": {"kind": "drf", "model": BOOK_DRF, "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
-    "fit_nll_paper_blackout": {"kind": "drf", "train": _FIT_NLL, "blackouts": BLACKOUT_TRAINING},
-    "fit_staged_paper_blackout": {"kind": "drf", "train": _FIT_STAGED, "blackouts": BLACKOUT_TRAINING},
-    "fit_paper_noise1": {"kind": "drf", "train": FIT_THE_MEAN, "train_max_noise": 1.0},
-    "fit_lstm_blackout": {"kind": "lstm", "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
-    "fit_lstm_noise1": {"kind": "lstm", "train": FIT_THE_MEAN, "train_max_noise": 1.0},
-    "fit_no_dynamics": {"kind": "no_dynamics", "train": FIT_THE_MEAN},
-    "fit_no_dynamics_blackout": {"kind": "no_dynamics", "train": FIT_THE_MEAN, "blackouts": BLACKOUT_TRAINING},
-    # a filter lever: the mean decoded from z alone, sigma from P alone (as the RKN's decoder)
-    "fit_split_paper_blackout": {"kind": "drf", "model": {"decoder_split": True}, "train": FIT_THE_MEAN,
-                                 "blackouts": BLACKOUT_TRAINING},
-    "fit_split_book": {"kind": "drf", "model": BOOK_DRF | {"decoder_split": True}, "train": FIT_THE_MEAN,
-                       "blackouts": BLACKOUT_TRAINING},
-    # a filter lever: the one-step prior z_{t|t-1} decoded and fitted too (the transition must predict)
-    "fit_prior_paper_blackout": {"kind": "drf", "train": _FIT_PRIOR, "blackouts": BLACKOUT_TRAINING},
-    "fit_prior_split_book": {"kind": "drf", "model": BOOK_DRF | {"decoder_split": True}, "train": _FIT_PRIOR,
-                             "blackouts": BLACKOUT_TRAINING},
-    # a filter lever: Q learned but constant in time (the paper's LSTM transition emits q_t per step)
-    "fit_constq_paper_blackout": {"kind": "drf", "model": {"constant_q": True}, "train": FIT_THE_MEAN,
-                                  "blackouts": BLACKOUT_TRAINING},
-}
-VARIANTS.update(ROUND2_VARIANTS)
+def _resolve(value: Any, parts: dict[str, Any], where: str) -> dict[str, Any]:
+    """A part's name, a mapping, or a list of them merged left to right -> one mapping."""
+    if isinstance(value, str):
+        if value not in parts:
+            raise ValueError(f"{where}: unknown part {value!r}; params/protocols.yaml defines {sorted(parts)}")
+        return dict(parts[value])
+    if isinstance(value, dict):
+        return dict(value)
+    if isinstance(value, list):
+        out: dict[str, Any] = {}
+        for item in value:
+            out |= _resolve(item, parts, where)
+        return out
+    raise ValueError(f"{where}: expected a part's name, a mapping or a list of them, got {value!r}")
 
-# The third round: competence. Trained without pure-noise frames (max noise 0.5 only), so 0.75, 1.0 and the
-# blackout stay out of distribution. Levers that make r follow frame quality and let the gain follow r:
-# an observation loss (w_t decoded alone, r_t its variance: ``TrainConfig.obs_weight``), a monotone link
-# from one learned quality score to every r_i (``noise_head='quality'``), and a state whose units are
-# physical (the known-dynamics filter, ``drfkit.models.known_dynamics``: r and q on the same scale).
-_FIT_OBS = FIT_THE_MEAN | {"obs_weight": 1.0}
-_FIT_PRIOR_OBS = _FIT_PRIOR | {"obs_weight": 1.0}
-_SPLIT_BOOK = BOOK_DRF | {"decoder_split": True}
-WIDE_ENCODER = {"encoder_channels": 32, "feature_dim": 128}  # the encoder probe's wider encoder
-_WIDE = WIDE_ENCODER
-_PHYSICAL_DRF = {"transition_kind": "basis", "latent": 17, "memory_dims": 15, "noise_head": "log", "readout": "identity"}
-ROUND3_VARIANTS = {
-    "fit_prior_split_book_clean": {"kind": "drf", "model": _SPLIT_BOOK, "train": _FIT_PRIOR},
-    "fit_obs_prior_split_book": {"kind": "drf", "model": _SPLIT_BOOK, "train": _FIT_PRIOR_OBS},
-    "fit_obs_quality_book": {"kind": "drf", "model": _SPLIT_BOOK | {"noise_head": "quality"}, "train": _FIT_PRIOR_OBS},
-    # the DRF in the output's units: 2 observed latent dims ARE (cos, sin) (read as they are, no decoder), 15
-    # memory dims, so r and q are variances of (cos, sin) and the observation loss pins r's scale
-    "fit_physical_book": {"kind": "drf", "model": _PHYSICAL_DRF, "train": _FIT_PRIOR_OBS},
-    "fit_known_dynamics": {"kind": "known_dynamics", "train": _FIT_OBS},
-    "fit_known_dynamics_e2e": {"kind": "known_dynamics", "train": FIT_THE_MEAN},
-    "fit_lstm": {"kind": "lstm", "train": FIT_THE_MEAN},
-    # the encoder probe: is no_dynamics' distance to the per-frame Bayes estimate capacity or data? New
-    # trajectories every epoch (unlimited frames), a wider encoder (32 channels, 128 features), both
-    "fit_no_dynamics_fresh_motion": {"kind": "no_dynamics", "train": FIT_THE_MEAN | {"fresh_motion": True}},
-    "fit_no_dynamics_wide": {"kind": "no_dynamics", "model": _WIDE, "train": FIT_THE_MEAN},
-    "fit_no_dynamics_wide_fresh_motion": {"kind": "no_dynamics", "model": _WIDE, "train": FIT_THE_MEAN | {"fresh_motion": True}},
-    # what the probe found (capacity, not data), carried into every model of the book's protocol
-    "fit_known_dynamics_wide": {"kind": "known_dynamics", "model": _WIDE, "train": _FIT_OBS},
-    "fit_lstm_wide": {"kind": "lstm", "model": _WIDE, "train": FIT_THE_MEAN},
-    "fit_physical_book_wide": {"kind": "drf", "model": _PHYSICAL_DRF | _WIDE, "train": _FIT_PRIOR_OBS},
-    "fit_obs_quality_book_wide": {"kind": "drf", "model": _SPLIT_BOOK | {"noise_head": "quality"} | _WIDE,
-                                  "train": _FIT_PRIOR_OBS},
-    # the paper's other lever, "driving the learned state transition network towards a known dynamics model":
-    # the known-dynamics filter's state and encoder with a learned transition (x' = x + g(x), started as a
-    # random walk; q learned, as a learned transition's error must go somewhere), free or pulled toward the
-    # true pendulum (``KnownDynamicsFilter.regulariser``)
-    "fit_known_dynamics_learned": {"kind": "known_dynamics", "model": {"transition": "learned", "learn_q": True},
-                                   "train": _FIT_OBS},
-    "fit_known_dynamics_pulled": {"kind": "known_dynamics",
-                                  "model": {"transition": "learned", "learn_q": True, "pull": 100.0}, "train": _FIT_OBS},
-}
-VARIANTS.update(ROUND3_VARIANTS)
 
-# The fourth round: the paper's model fit well, and a gain calibrated out of distribution (docs/dynamics.md, "Why
-# the DRF does not filter, measured"). Trained, like the third, without pure-noise frames.
-ROUND4_VARIANTS = {
-    # the paper's DRF as written (30-dim LayerNorm latent, ELU + 1 r, LSTM transition, decoder on [z, P] with
-    # MC dropout), fit with the recipe that fits the mean and the wider encoder, as its baselines are
-    "fit_paper_wide": {"kind": "drf", "model": _WIDE, "train": FIT_THE_MEAN},
-    # the DRF whose gain is calibrated out of distribution (``drfkit.models.drf.CalibratedGainDRF``): r from the frame's
-    # noise statistic through a monotone log-linear link; alone, and with the one-step prior decoded and fitted
-    # (a prior variance far above the prior's error costs likelihood there: q is held to what F achieves)
-    "fit_calibrated_wide": {"kind": "drf_calibrated", "model": _WIDE, "train": FIT_THE_MEAN},
-    "fit_calibrated_prior_wide": {"kind": "drf_calibrated", "model": _WIDE, "train": _FIT_PRIOR},
-}
-VARIANTS.update(ROUND4_VARIANTS)
+def load_variants(path: str | Path | None = None) -> tuple[dict[str, dict[str, Any]], dict[int, dict[str, dict[str, Any]]],
+                                                           dict[str, Any]]:
+    """(variants, rounds, parts) from params/protocols.yaml: each variant resolved (its parts merged), checked."""
+    import yaml
+
+    path = Path(path) if path is not None else PARAMS_DIR / "protocols.yaml"
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise FileNotFoundError(f"the training recipes live in {path}; it is missing ({exc}): restore it from git") from exc
+    parts, rounds_in = data.get("parts") or {}, data.get("rounds") or {}
+    variants: dict[str, dict[str, Any]] = {}
+    rounds: dict[int, dict[str, dict[str, Any]]] = {}
+    for number, entries in rounds_in.items():
+        rounds[int(number)] = {}
+        for name, entry in (entries or {}).items():
+            where = f"{path.name}: variant {name!r}"
+            if name in variants:
+                raise ValueError(f"{where} is defined twice")
+            unknown = set(entry) - set(VARIANT_FIELDS)
+            if unknown or "kind" not in entry:
+                raise ValueError(f"{where}: fields {sorted(unknown)} unknown or 'kind' missing; allowed {VARIANT_FIELDS}")
+            spec: dict[str, Any] = {"kind": entry["kind"]}
+            for field in ("model", "train", "blackouts"):
+                if field in entry:
+                    spec[field] = _resolve(entry[field], parts, where)
+            bad = set(spec.get("train", {})) - set(RECIPE_FIELDS)
+            if bad:
+                raise ValueError(f"{where}: recipe fields {sorted(bad)} unknown; a recipe sets {RECIPE_FIELDS}")
+            if "blackouts" in spec:
+                if set(spec["blackouts"]) != {"fraction", "lengths"}:
+                    raise ValueError(f"{where}: blackouts need 'fraction' and 'lengths', got {spec['blackouts']}")
+                spec["blackouts"]["lengths"] = tuple(spec["blackouts"]["lengths"])
+            if "train_max_noise" in entry:
+                level = float(entry["train_max_noise"])
+                if not 0.0 <= level <= 1.0:
+                    raise ValueError(f"{where}: train_max_noise must lie in [0, 1], got {level}")
+                spec["train_max_noise"] = level
+            variants[name] = rounds[int(number)][name] = spec
+    return variants, rounds, parts
+
+
+VARIANTS, _ROUNDS, _PARTS = load_variants()
+BLACKOUT_TRAINING = _resolve("training_blackouts", _PARTS, "params/protocols.yaml") | {
+    "lengths": tuple(_PARTS["training_blackouts"]["lengths"])}
+BOOK_DRF = _resolve("book_drf", _PARTS, "params/protocols.yaml")
+FIT_THE_MEAN = _resolve("fit_the_mean", _PARTS, "params/protocols.yaml")
+WIDE_ENCODER = _resolve("wide", _PARTS, "params/protocols.yaml")
+ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS = (_ROUNDS.get(n, {}) for n in (2, 3, 4))
 
 # The ablation's budgets (``drfkit.study.ablation``); data from the profiles' pend_data_seed.
 ABLATION_BUDGETS: dict[str, dict[str, Any]] = {
