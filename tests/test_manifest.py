@@ -1,5 +1,6 @@
 """The run manifest records what is needed to rerun, and notebooks add their own entries."""
 import json
+from pathlib import Path
 
 import pytest
 
@@ -137,3 +138,51 @@ def test_cell_times_describe_the_last_run_only(tmp_path, monkeypatch):
     assert cli(["manifest", "--cell-times", "p"]) == 0
     table = pd.read_csv(path)
     assert sorted(set(table["notebook"])) == run and table["seconds"].tolist() == [2.0, 2.0]
+
+
+def test_results_are_checked_against_the_sources_they_were_made_from(tmp_path, monkeypatch):
+    """The digest covers drfkit/, notebooks/src/ and params/ (not docs/ or tests/); ``manifest --check`` fails
+    unless the profile's manifest recorded the tree's digest, and says what to rerun."""
+    import json
+
+    from drfkit.book.manifest import check_results, results_digest
+
+    repo = tmp_path / "repo"
+    for rel, text in (("drfkit/a.py", "x = 1\n"), ("notebooks/src/01.py", "# %%\n"), ("params/p.yaml", "a: 1\n"),
+                      ("docs/d.md", "words\n")):
+        (repo / rel).parent.mkdir(parents=True, exist_ok=True)
+        (repo / rel).write_text(text)
+    first = results_digest(repo)
+    (repo / "docs/d.md").write_text("other words\n")
+    assert results_digest(repo) == first
+    (repo / "params/p.yaml").write_text("a: 2\n")
+    assert results_digest(repo) != first
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
+    folder = tmp_path / "results" / "t"
+    folder.mkdir(parents=True)
+    same, words = check_results("t", repo)
+    assert not same and "records no digest" in words
+    (folder / "manifest.json").write_text(json.dumps({"environment": {"results_digest": results_digest(repo),
+                                                                      "git": {"commit": "abc"}}}))
+    assert check_results("t", repo) == (True, "results/t is this tree's (made by abc)")
+    (repo / "drfkit/a.py").write_text("x = 2\n")
+    same, words = check_results("t", repo)
+    assert not same and "made by abc from other sources" in words and "make reproduce PROFILE=t" in words
+
+
+def test_the_manifest_names_the_cpu_by_family_and_model():
+    from drfkit.book.manifest import cpu_identity
+
+    ident = cpu_identity()
+    assert ident.get("name")
+    if Path("/proc/cpuinfo").exists():
+        assert {"vendor", "family", "model"} <= set(ident)
+
+
+def test_the_check_command_answers_as_check_results(capsys):
+    from drfkit.book.manifest import check_results
+    from drfkit.cli import main as cli
+
+    same, words = check_results("paper")
+    assert cli(["manifest", "--check", "paper"]) == (0 if same else 1)
+    assert words in capsys.readouterr().out

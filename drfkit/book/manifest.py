@@ -58,6 +58,58 @@ def git_commit(repo: Path = REPO_ROOT) -> dict[str, Any]:
             "dirty": bool(run("status", "--porcelain", "--", ".", *outputs))}
 
 
+# what a profile's results are computed from: the library, the notebooks' sources and the profiles
+RESULT_SOURCES = ("drfkit/**/*.py", "notebooks/src/*.py", "params/*.yaml")
+
+
+def results_digest(repo: Path = REPO_ROOT) -> str:
+    """sha256 of every file a profile's results depend on (``RESULT_SOURCES``: path and bytes, in path order):
+    two trees with the same digest compute the same results; a docs/ or tests/ edit leaves it."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    files = sorted({f for pattern in RESULT_SOURCES for f in repo.glob(pattern) if f.is_file()
+                    and "__pycache__" not in f.parts})
+    for f in files:
+        digest.update(f.relative_to(repo).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def cpu_identity() -> dict[str, str]:
+    """The CPU as /proc/cpuinfo names it: model name, vendor, family, model, stepping (a virtual machine's
+    model name can be as vague as 'AMD EPYC'; family and model tell its generation)."""
+    fields = {"model name": "name", "vendor_id": "vendor", "cpu family": "family", "model": "model",
+              "stepping": "stepping"}
+    out: dict[str, str] = {}
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in fields and fields[key] not in out:
+                    out[fields[key]] = value.strip()
+                if not line.strip() and out:
+                    break
+    except OSError:
+        pass
+    return out or {"name": platform.processor() or platform.machine()}
+
+
+def check_results(profile: str, repo: Path = REPO_ROOT) -> tuple[bool, str]:
+    """Whether ``results/<profile>`` is the code's: its manifest's ``results_digest`` (recorded by the run that
+    made it) against the tree's now. Returns (same, a sentence saying so and what to do)."""
+    env = read_manifest(profile).get("environment", {})
+    recorded, now = env.get("results_digest"), results_digest(repo)
+    commit = (env.get("git") or {}).get("commit") or "an unknown commit"
+    if recorded is None:
+        return False, (f"results/{profile} records no digest of its sources (made by {commit} before digests were "
+                       f"recorded): rerun `make reproduce PROFILE={profile}` to make it the code's")
+    if recorded != now:
+        return False, (f"results/{profile} was made by {commit} from other sources than this tree's (drfkit/, "
+                       f"notebooks/src/, params/ differ): rerun `make reproduce PROFILE={profile}`")
+    return True, f"results/{profile} is this tree's (made by {commit})"
+
+
 def cpu_name() -> str:
     try:
         with open("/proc/cpuinfo") as fh:
@@ -83,12 +135,14 @@ def environment() -> dict[str, Any]:
         "python": platform.python_version(),
         "platform": platform.platform(),
         "cpu": cpu_name(),
+        "cpu_id": cpu_identity(),
         "cpu_count": os.cpu_count(),
         "gpu": gpu,
         "torch_threads": torch.get_num_threads(),
         "torch_build": torch.__config__.show().strip().splitlines()[:6],
         "packages": versions,
         "git": git_commit(),
+        "results_digest": results_digest(),
     }
 
 

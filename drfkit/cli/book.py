@@ -179,13 +179,24 @@ def budget(argv: list[str]) -> int:
 def manifest(argv: list[str]) -> int:
     """``python -m drfkit manifest --cell-times PROFILE``: rebuild ``cell_times.csv`` from the
     executed notebooks of a profile's last pipeline run (the manifest's ``pipeline.notebooks``; the
-    pipeline writes it after each notebook), dropping every other notebook's rows."""
+    pipeline writes it after each notebook), dropping every other notebook's rows. ``--check PROFILE``:
+    exit 1 unless the profile's results were made from this tree's sources (``manifest.check_results``)."""
     from drfkit.book.manifest import read_manifest, record_cell_times
     from drfkit.util.paths import NOTEBOOKS_DIR, results_dir
 
     ap = parser("manifest")
-    ap.add_argument("--cell-times", metavar="PROFILE", required=True)
+    ap.add_argument("--cell-times", metavar="PROFILE")
+    ap.add_argument("--check", metavar="PROFILE",
+                    help="exit 1 unless results/PROFILE was made from this tree's drfkit/, notebooks/src/ and params/")
     args = ap.parse_args(argv)
+    if args.check:
+        from drfkit.book.manifest import check_results
+
+        same, words = check_results(args.check)
+        print(words)
+        return 0 if same else 1
+    if not args.cell_times:
+        ap.error("name --cell-times PROFILE or --check PROFILE")
     # the last pipeline's notebooks, else every notebook of the book (their sources' names)
     run = read_manifest(args.cell_times).get("pipeline", {}).get("notebooks") \
         or sorted(p.stem for p in NOTEBOOKS_DIR.glob("[0-9][0-9]_*.ipynb"))
