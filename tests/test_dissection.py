@@ -255,3 +255,11 @@ def test_the_screen_command_judges_trained_variants_on_validation_only(tmp_path,
     assert table["variant"].tolist() == ["fit_calibrated_wide"] and {"eligible", "chosen", "gain_slope"} <= set(table)
     assert not list(tmp_path.glob("data/*test*"))      # the screen never builds a test split
     assert cli(["screen", "--variants", "nope"]) == 2 and "unknown variant" in capsys.readouterr().err
+    capsys.readouterr()
+    assert cli(["screen", "--budget", "fit_tiny", "--variants", "fit_calibrated_wide", "--seeds", "0",
+                "--out", str(tmp_path), "--per-seed"]) == 0
+    import re
+    printed = capsys.readouterr().out
+    assert re.search(r"fit_calibrated_wide: [01] of 1 seeds fail", printed) and "failed" in printed
+    rows = pd.read_csv(out)  # the first call's table is untouched by a call without --csv
+    assert len(rows) == 1

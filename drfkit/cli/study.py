@@ -63,6 +63,8 @@ def screen(argv: list[str]) -> int:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None, help="the ablation's folder (default results/ablation)")
     ap.add_argument("--csv", default=None, help="also write the table here")
+    ap.add_argument("--per-seed", action="store_true",
+                    help="one row per seed, with 'failed' (r does not follow the noise) and the failure rate")
     args = ap.parse_args(argv)
     for name in args.variants:
         try:
@@ -71,8 +73,11 @@ def screen(argv: list[str]) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
     torch.set_num_threads(args.threads)
-    table = screen_variants(args.variants, args.seeds, args.budget, args.out)
+    table = screen_variants(args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed)
     print(table.round(4).to_string(index=False))
+    if args.per_seed:
+        for variant, rows in table.groupby("variant", sort=False):
+            print(f"{variant}: {int(rows['failed'].sum())} of {len(rows)} seeds fail (validation rho(r, level) < 0.5)")
     if args.csv:
         atomic_write_csv(args.csv, table)
     return 0

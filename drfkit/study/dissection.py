@@ -110,12 +110,19 @@ SCREEN_MIN_SPEARMAN = 0.8
 SCREEN_MAE_TIE = 0.05
 
 
-def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5) -> pd.DataFrame:
+# a seed whose r does not follow the noise in distribution (the known-dynamics filter's failure, docs/dynamics.md)
+FAILED_SEED_SPEARMAN = 0.5
+
+
+def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5,
+                    per_seed: bool = False) -> pd.DataFrame:
     """The calibrated-gain screen on VALIDATION data at the training noise only (levels <= ``train_level``;
     never 0.75 or a blackout): per trained (variant, seed) of the protocol ablation (``drfkit.study.ablation``,
     trained if missing) ``dissection.in_distribution_screen``; 'eligible' and 'chosen' by the rule:
     seed means with rho(log r, level) >= SCREEN_MIN_SPEARMAN and gain slope < 0 are eligible, the lowest
-    MAE is chosen, MAEs within SCREEN_MAE_TIE of the lowest are a tie broken by the steeper gain slope."""
+    MAE is chosen, MAEs within SCREEN_MAE_TIE of the lowest are a tie broken by the steeper gain slope.
+    ``per_seed``: the rows per (variant, seed) instead, with 'failed' (rho < FAILED_SEED_SPEARMAN: a seed whose
+    r does not follow the noise, the known-dynamics filter's failure mode)."""
     from drfkit.methods.train import load_checkpoint
     from drfkit.study import ablation
 
@@ -131,6 +138,8 @@ def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_l
             rows.append({"variant": variant, "seed": seed,
                          **dis.in_distribution_screen(trace, val["noise"], max_level=train_level)})
     table = pd.DataFrame(rows)
+    if per_seed:  # each seed's row, and whether its r fails to follow the noise in distribution
+        return table.assign(failed=table["r_level_spearman"] < FAILED_SEED_SPEARMAN)
     means = table.groupby("variant", sort=False).mean(numeric_only=True).drop(columns="seed")
     return screen_choice(means.join(table.groupby("variant", sort=False).size().rename("n_seeds"))).reset_index()
 
@@ -159,4 +168,4 @@ def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
 
 
-__all__ = ["SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters", "screen_choice", "screen_variants"]
+__all__ = ["FAILED_SEED_SPEARMAN", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters", "screen_choice", "screen_variants"]
