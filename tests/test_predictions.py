@@ -78,3 +78,22 @@ def test_a_damaged_entry_is_computed_again(tmp_path):
     path.write_bytes(b"truncated")
     again = predictions.cached_predict_rates(model, data.inputs, **args)[0]
     assert torch.equal(good.mean, again.mean) and path.stat().st_size > 100
+
+
+def test_the_prediction_key_follows_the_code_that_computes_it(tmp_path, monkeypatch):
+    """An edit to a model's source drops a cached prediction; an edit elsewhere keeps it."""
+    from drfkit.methods import predictions
+    from drfkit.util import paths
+
+    (tmp_path / "drfkit" / "models").mkdir(parents=True)
+    (tmp_path / "drfkit" / "report").mkdir(parents=True)
+    model_src, figure_src = tmp_path / "drfkit" / "models" / "m.py", tmp_path / "drfkit" / "report" / "f.py"
+    model_src.write_text("a = 1\n"), figure_src.write_text("b = 1\n")
+    monkeypatch.setattr(paths, "REPO_ROOT", tmp_path)
+    first = predictions.prediction_code_sha256()
+    figure_src.write_text("b = 2\n")
+    predictions._code_sha256.cache_clear()  # a new process reads the sources again
+    assert predictions.prediction_code_sha256() == first
+    model_src.write_text("a = 2\n")
+    predictions._code_sha256.cache_clear()
+    assert predictions.prediction_code_sha256() != first

@@ -6,7 +6,8 @@ is fixed by what went into it, so the cache file is named by the hash of exactly
 
     key = the model's content (sha256 of its configuration and every weight), the inputs'
           content (sha256 of their bytes), the dropout rates, the number of samples, the seed,
-          the chunk size (it orders the dropout masks) and the device type.
+          the chunk size (it orders the dropout masks), the device type and the code that computes
+          it (``PREDICTION_CODE``: the models, core and the sampling, not the rest of drfkit).
 
 Change any of these and the file name changes, so a stale entry is never read. Files live
 in ``results/<profile>/predictions/`` (not committed; delete the folder to empty the cache),
@@ -19,6 +20,7 @@ stale prediction.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -52,13 +54,34 @@ def tensor_sha256(x: torch.Tensor) -> str:
                           ).hexdigest()
 
 
+# the code a prediction is computed by: the models, the filter and metrics beneath them, and the sampling
+PREDICTION_CODE = ("drfkit/models/*.py", "drfkit/core/*.py", "drfkit/methods/uncertainty.py")
+
+
+def prediction_code_sha256(patterns=PREDICTION_CODE) -> str:
+    """sha256 of the source files a prediction is computed by (path and bytes): an edit to a model's numerics
+    drops the cached predictions, an edit anywhere else (a figure, a claim) keeps them."""
+    from drfkit.util import paths
+
+    return _code_sha256(paths.REPO_ROOT, tuple(patterns))
+
+
+@functools.lru_cache(maxsize=4)
+def _code_sha256(root, patterns: tuple[str, ...]) -> str:
+    """Read once per process and root (sources do not change under a running kernel)."""
+    digest = hashlib.sha256()
+    for f in sorted({f for pattern in patterns for f in root.glob(pattern) if f.is_file()}):
+        digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def prediction_key(model, inputs: torch.Tensor, n_samples: int, rates: list[float], seed: int,
                    batch_size: int | None, device: torch.device | str | None) -> str:
     """The cache file stem of a prediction (see the module docstring)."""
     device_type = torch.device(device).type if device is not None else next(model.parameters()).device.type
     return param_hash({"format": FORMAT, "model": weights_sha256(model), "inputs": tensor_sha256(inputs),
                        "n_samples": int(n_samples), "rates": [float(r) for r in rates], "seed": int(seed),
-                       "batch_size": batch_size, "device": device_type})
+                       "batch_size": batch_size, "device": device_type, "code": prediction_code_sha256()})
 
 
 def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, dropout_rates, seed: int,
@@ -91,4 +114,4 @@ def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, d
     return preds
 
 
-__all__ = ["cached_predict_rates", "prediction_key", "tensor_sha256", "weights_sha256"]
+__all__ = ["PREDICTION_CODE", "cached_predict_rates", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]
