@@ -176,3 +176,27 @@ def test_the_pipeline_flag_sets_the_environment_for_the_kernels(monkeypatch):
     monkeypatch.setattr(pipeline, "die_with_parent", lambda: None)
     cli(["reproduce", "--profile", "quick", "--remeasure"])
     assert seen["env"] is True
+
+
+def test_a_drfkit_computation_is_keyed_by_its_import_closure(tmp_path):
+    """An edit to a module the computation imports (directly, inside a function, or through a package's
+    __init__) changes its key; an edit to a module it never imports does not."""
+    files = {"drfkit/__init__.py": "", "drfkit/a/__init__.py": "", "drfkit/a/study.py":
+             "from drfkit.b.maths import f\n\ndef g():\n    from drfkit.b import later\n    return f()\n",
+             "drfkit/b/__init__.py": "", "drfkit/b/maths.py": "def f():\n    return 1\n",
+             "drfkit/b/later.py": "x = 1\n", "drfkit/c/__init__.py": "", "drfkit/c/figure.py": "y = 1\n"}
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+
+    def key():
+        measurements.import_graph.cache_clear()
+        return measurements.closure_sha256("drfkit.a.study", tmp_path)
+    first = key()
+    (tmp_path / "drfkit/c/figure.py").write_text("y = 2\n")
+    assert key() == first                      # never imported
+    for rel in ("drfkit/b/maths.py", "drfkit/b/later.py", "drfkit/b/__init__.py", "drfkit/__init__.py"):
+        before = key()
+        (tmp_path / rel).write_text((tmp_path / rel).read_text() + "# edited\n")
+        assert key() != before, rel
+    assert measurements._code_key("tests.test_measurements") == measurements.code_sha256()

@@ -5,12 +5,14 @@ and deterministic studies that cannot have changed. ``cached(profile, fn, *args,
 calls ``fn(*args)`` once and stores what it returned under a file named by
 
     key = fn's qualified name, the content of every argument (tensors and weights by sha256,
-          parameters, configs and dataclasses field by field), the sha256 of every drfkit
-          source file, and -- for a timing (``timing=True``) -- this machine: CPU model,
-          cores, GPU, torch version and torch threads.
+          parameters, configs and dataclasses field by field), the sha256 of the sources of fn's
+          module and of every drfkit module it imports, transitively (``closure_sha256``), and --
+          for a timing (``timing=True``) -- this machine: CPU model, cores, GPU, torch version and
+          torch threads.
 
-Change any of these and the name changes, so a stale entry is never read: an edit to drfkit
-recomputes everything, an edit to a notebook recomputes nothing. A timing is a measurement,
+Change any of these and the name changes, so a stale entry is never read: an edit to a module the
+computation imports recomputes it, an edit elsewhere in drfkit (a figure, a claim) or to a notebook
+recomputes nothing. A timing is a measurement,
 not a fact, so its reuse is said where the reader looks (one line per call, and the
 notebook's manifest entry lists what was reused); ``DRFKIT_REMEASURE=1`` in the environment
 (``make reproduce REMEASURE=1``, ``python -m drfkit reproduce --remeasure``) measures and
@@ -61,6 +63,54 @@ def code_sha256() -> str:
     for path in sorted((REPO_ROOT / "drfkit").rglob("*.py")):
         digest.update(path.relative_to(REPO_ROOT).as_posix().encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=4)
+def import_graph(root: Path = REPO_ROOT) -> dict[str, frozenset[str]]:
+    """drfkit module -> the drfkit modules it imports, at module level or inside functions (read once per
+    process): what a computation's code closure is made of."""
+    import ast
+
+    package = root / "drfkit"
+    modules = {".".join(p.relative_to(root).with_suffix("").parts).removesuffix(".__init__"): p
+               for p in package.rglob("*.py") if "__pycache__" not in p.parts}
+    graph: dict[str, frozenset[str]] = {}
+    for name, path in modules.items():
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names if a.name.startswith("drfkit")}
+            elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("drfkit"):
+                deps.add(node.module)
+                deps |= {f"{node.module}.{a.name}" for a in node.names if f"{node.module}.{a.name}" in modules}
+        graph[name] = frozenset(d for d in deps if d in modules)
+    return graph
+
+
+def closure_sha256(module: str, root: Path = REPO_ROOT) -> str:
+    """sha256 of the sources of ``module`` and of every drfkit module it imports, transitively (with the packages
+    whose ``__init__`` an import runs): an edit to a module it never imports keeps a cached result."""
+    graph = import_graph(root)
+    seen, stack = set(), [module]
+    while stack:
+        name = stack.pop()
+        parts = name.split(".")
+        for i in range(1, len(parts) + 1):  # importing a.b.c runs a/__init__ and a/b/__init__
+            parent = ".".join(parts[:i])
+            if parent in graph and parent not in seen:
+                seen.add(parent)
+                stack.extend(graph[parent])
+    digest = hashlib.sha256()
+    for name in sorted(seen):
+        path = root / Path(*name.split("."))
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def _code_key(module: str) -> str:
+    """A drfkit function's import closure; any other's (a notebook's, a test's) every drfkit source."""
+    return closure_sha256(module) if module.split(".")[0] == "drfkit" else code_sha256()
 
 
 def machine_fingerprint() -> dict[str, Any]:
@@ -127,7 +177,7 @@ def fingerprint(obj: Any) -> Any:
 def key(fn: Callable, args: tuple, kwargs: dict[str, Any], *, with_machine: bool) -> str:
     """The cache file stem of ``fn(*args, **kwargs)`` (see the module docstring)."""
     return param_hash({"format": FORMAT, "fn": f"{fn.__module__}.{fn.__qualname__}", "args": fingerprint(args),
-                       "kwargs": fingerprint(kwargs), "code": code_sha256(),
+                       "kwargs": fingerprint(kwargs), "code": _code_key(fn.__module__),
                        "machine": machine_fingerprint() if with_machine else None}, length=24)
 
 
@@ -175,5 +225,5 @@ def cached(profile: str | None, fn: Callable, *args: Any, timing: bool, **kwargs
     return value
 
 
-__all__ = ["cached", "code_sha256", "fingerprint", "key", "machine_fingerprint", "measurements_dir", "remeasure_requested",
+__all__ = ["cached", "closure_sha256", "code_sha256", "import_graph", "fingerprint", "key", "machine_fingerprint", "measurements_dir", "remeasure_requested",
            "reused"]
