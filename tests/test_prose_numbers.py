@@ -149,3 +149,11 @@ def test_the_calibrated_gain_screen_in_docs_is_its_committed_table():
     assert [float(m) for m in maes] == [round(t.loc[v, "mae"], 4) for v in ("fit_calibrated_wide", "fit_calibrated_prior_wide")]
     slopes = re.search(r"slope −([0-9.]+) against −([0-9.]+) per unit", text).groups()
     assert [-float(v) for v in slopes] == [round(t.loc[v, "gain_slope"], 2) for v in ("fit_calibrated_prior_wide", "fit_calibrated_wide")]
+
+
+def test_the_docs_name_the_test_seed_the_paper_profile_uses():
+    from drfkit.study.params import load_profile
+
+    seed = load_profile("paper")["pend_test_seed"]
+    assert f"the test split of `pend_test_seed` {seed}" in (REPO_ROOT / "docs" / "dynamics.md").read_text()
+    assert seed not in (load_profile("paper")["pend_data_seed"] + k for k in (0, 1, 2))

@@ -318,7 +318,7 @@ def frame_noise_statistic(images: torch.Tensor) -> torch.Tensor:
 
 
 class CalibratedGainDRF(DeepRecursiveFilter):
-    """The paper's DRF with r_t = exp(log_r0 + softplus(slope) s_t) per latent dim (module docstring)."""
+    """The paper's DRF with r_t = exp(log_r0 + softplus(slope) s_t) per latent dim (the comment above)."""
 
     kind = "drf_calibrated"
     spec = ModelSpec("DRF, calibrated gain", "tab:cyan", studies=("pendulum",),
