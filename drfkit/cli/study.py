@@ -46,13 +46,26 @@ def claims(argv: list[str]) -> int:
     return 0
 
 
+def _known_variants(names: list[str]) -> bool:
+    """Whether every name is a variant (``drfkit.methods.protocols.variant_spec``); prints the error if not."""
+    from drfkit.methods.protocols import variant_spec
+
+    for name in names:
+        try:
+            variant_spec(name)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return False
+    return True
+
+
 def screen(argv: list[str]) -> int:
     """``python -m drfkit screen --budget fit --variants V --seeds 0 1 [--csv F]``: train (or load) the protocol
     ablation's runs of the variants and judge them by the screening rule on the validation split at the
     training noise only (``drfkit.study.dissection.screen_variants``); prints the table, writes it to --csv."""
     import torch
 
-    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, variant_spec
+    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS
     from drfkit.study.dissection import screen_variants
     from drfkit.util.io import atomic_write_csv
 
@@ -66,12 +79,8 @@ def screen(argv: list[str]) -> int:
     ap.add_argument("--per-seed", action="store_true",
                     help="one row per seed, with 'failed' (r does not follow the noise) and the failure rate")
     args = ap.parse_args(argv)
-    for name in args.variants:
-        try:
-            variant_spec(name)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+    if not _known_variants(args.variants):
+        return 2
     torch.set_num_threads(args.threads)
     table = screen_variants(args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed)
     print(table.round(4).to_string(index=False))
@@ -91,7 +100,7 @@ def ablation(argv: list[str]) -> int:
 
     import torch
 
-    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, summarise_ablation, variant_spec
+    from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, summarise_ablation
     from drfkit.study.ablation import ROUNDS, ablation_table, run_variant, summary_markdown
 
     ap = parser("ablation", "Train and judge protocol variants on validation data.")
@@ -111,12 +120,8 @@ def ablation(argv: list[str]) -> int:
         summary = summarise_ablation(table)
         print(summary_markdown(summary) if args.markdown else summary.to_string(index=False))
         return 0
-    for name in args.variants:
-        try:
-            variant_spec(name)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+    if not _known_variants(args.variants):
+        return 2
     torch.set_num_threads(args.threads)
     for name in args.variants:
         for seed in args.seeds:
