@@ -108,10 +108,10 @@ def _stem(profile, kind, seed):
 def test_grid_runs_are_every_study_protocol_model_and_seed_of_the_profile():
     values = load_profile("quick")
     runs = grid.grid_runs(values)
-    # pendulum: the paper protocol's 3 models and the book's 4 (it adds the known-dynamics filter) x 2 seeds;
-    # pedestrians: 2 protocols x 4 models x 2 seeds, but Monoloco trains one set of runs under both (its
-    # published schedule), so its book runs are not tasks again
-    assert len(runs) == 6 + 8 + 8 + 6 and len(set(runs)) == len(runs)
+    # pendulum: the paper protocol's 3 models and the book's 5 (it adds the calibrated-gain DRF and the
+    # known-dynamics filter) x 2 seeds; pedestrians: 2 protocols x 4 models x 2 seeds, but Monoloco trains one set
+    # of runs under both (its published schedule), so its book runs are not tasks again
+    assert len(runs) == 6 + 10 + 8 + 6 and len(set(runs)) == len(runs)
     assert "known_dynamics" in {r.kind for r in runs if r.protocol == "book" and r.study == "pendulum"}
     assert "known_dynamics" not in {r.kind for r in runs if r.protocol == "paper"}
     assert {r.kind for r in runs if r.study == "pedestrians" and r.protocol == "book"} == {"drf", "no_dynamics", "lstm"}

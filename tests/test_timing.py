@@ -101,7 +101,7 @@ STREAM_CASES = [(study, kind) for study, (_, _, kinds) in STUDIES.items() for ki
 
 @pytest.mark.parametrize("study,kind", STREAM_CASES)
 def test_streaming_steps_reproduce_the_whole_sequence(study, kind):
-    assert {k for _, k in STREAM_CASES} == {"drf", "lstm", "no_dynamics", "monoloco", "known_dynamics"}
+    assert {k for _, k in STREAM_CASES} == {"drf", "drf_calibrated", "lstm", "no_dynamics", "monoloco", "known_dynamics"}
     model = build_timing_model(kind, study)
     seq = example_frames(study, batch=3, n_frames=5, seed=1)
     with torch.no_grad():
