@@ -263,3 +263,12 @@ def test_the_screen_command_judges_trained_variants_on_validation_only(tmp_path,
     assert re.search(r"fit_calibrated_wide: [01] of 1 seeds fail", printed) and "failed" in printed
     rows = pd.read_csv(out)  # the first call's table is untouched by a call without --csv
     assert len(rows) == 1
+
+
+def test_the_gating_study_gates_the_papers_drf_only():
+    from drfkit.study.gating_study import gated_models
+
+    torch.manual_seed(0)
+    models = {("drf", 0): build_model(default_config("drf", "pendulum", 2, latent=4)),
+              ("drf_calibrated", 0): build_model(default_config("drf_calibrated", "pendulum", 2, latent=4))}
+    assert list(gated_models(models)) == [0] and gated_models(models)[0] is models[("drf", 0)]

@@ -323,6 +323,8 @@ class CalibratedGainDRF(DeepRecursiveFilter):
     kind = "drf_calibrated"
     spec = ModelSpec("DRF, calibrated gain", "tab:cyan", studies=("pendulum",),
                      bench_modes=("batched", "no_sampling"), protocols={"book": "fit_calibrated_prior_wide"})
+    #: not gated: claim C7 is about the paper's DRF, and the gating tables hold one gated model per seed
+    competency_gain = False
 
     def __init__(self, input_kind: str = "pendulum", out_dim: int = 2, latent: int = 30,
                  r_slope_init: float = 2.0, **kwargs: Any):
