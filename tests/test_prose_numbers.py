@@ -157,3 +157,15 @@ def test_the_docs_name_the_test_seed_the_paper_profile_uses():
     seed = load_profile("paper")["pend_test_seed"]
     assert f"the test split of `pend_test_seed` {seed}" in (REPO_ROOT / "docs" / "dynamics.md").read_text()
     assert seed not in (load_profile("paper")["pend_data_seed"] + k for k in (0, 1, 2))
+
+
+def test_the_known_dynamics_reliability_in_docs_is_its_table():
+    """docs/dynamics.md states how many of the known-dynamics filter's fit-budget seeds fail (validation
+    rho(log r, level) < 0.5): the committed per-seed screen must say the same."""
+    t = _table("pendulum_known_dynamics_reliability.csv")
+    text = " ".join((REPO_ROOT / "docs" / "dynamics.md").read_text().split())
+    m = re.search(r"on the `fit` budget (\d+) of (\d+) seeds fail", text)
+    assert m and (int(m.group(1)), int(m.group(2))) == (int(t["failed"].sum()), len(t))
+    lo = re.search(r"ρ\(log r, level\) between ([0-9.]+) and ([0-9.]+)", text)
+    assert lo and (float(lo.group(1)), float(lo.group(2))) == (round(t["r_level_spearman"].min(), 2),
+                                                              round(t["r_level_spearman"].max(), 2))
