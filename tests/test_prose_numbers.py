@@ -169,3 +169,18 @@ def test_the_known_dynamics_reliability_in_docs_is_its_table():
     lo = re.search(r"ρ\(log r, level\) between ([0-9.]+) and ([0-9.]+)", text)
     assert lo and (float(lo.group(1)), float(lo.group(2))) == (round(t["r_level_spearman"].min(), 2),
                                                               round(t["r_level_spearman"].max(), 2))
+
+
+def test_the_known_dynamics_restart_rule_in_docs_is_its_table():
+    """docs/dynamics.md says the restart rule fired on none of the paper-scale runs and quotes their validation rho:
+    the committed restart table (dissection.restart_check) must say the same, and the profile must replace no seed."""
+    from drfkit.study.params import load_profile
+
+    t = _table("pendulum_known_dynamics_restarts.csv")
+    used = t[t["used"]].sort_values("slot")
+    text = " ".join((REPO_ROOT / "docs" / "dynamics.md").read_text().split())
+    m = re.search(r"ρ\(log r, level\) is ([0-9.]+), ([0-9.]+) and ([0-9.]+), so no seed is replaced", text)
+    assert m and [float(v) for v in m.groups()] == [round(v, 3) for v in used["r_level_spearman"]]
+    assert not used["failed"].any() and (used["training_seed"] == used["slot"]).all()
+    assert load_profile("paper")["pend_book_restarts"] == {}
+    assert re.search(r"0 of 3 paper-scale seeds fail the in-distribution rule", text)

@@ -208,3 +208,37 @@ def test_dynamics_probes_a_trained_drf_and_names_the_command_for_a_missing_one(t
     import pandas as pd
     row = pd.read_csv(table).iloc[0]
     assert row["model"] == "drf" and row["failure"] == "not measured"   # no no_dynamics named: no yardstick
+
+
+def test_the_restart_rule_trains_a_replaced_slot_from_its_own_seed_and_checks_every_run(tiny_profile, tmp_path,
+                                                                                         capsys):
+    """A slot named in the book protocol's ``restarts`` trains from the replacement seed under a name of its own; the
+    other slots keep their runs; ``dynamics --restarts`` judges the slot's first run and its replacement on validation."""
+    from drfkit.study.params import ParameterError
+    from drfkit.study.pendulum_runs import training_seed
+
+    path = tmp_path / "restarts.yaml"
+    write_profile(path, load_profile(tiny_profile) | {"pend_book_restarts": {"known_dynamics": {1: 3}}})
+    P = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(path)))
+    P0 = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(tiny_profile)))
+    assert [training_seed(P, "known_dynamics", s, "book") for s in (0, 1)] == [0, 3]
+    assert training_seed(P, "drf", 1, "book") == 1 and training_seed(P, "known_dynamics", 1, "paper") == 1
+    assert studies.train_config(P, "pendulum", "known_dynamics", 1, "book").seed == 3
+    stem = lambda prof, s: studies.checkpoint_stem(prof, "pendulum", "known_dynamics", s, "book").name  # noqa: E731
+    assert stem(P, 0) == stem(P0, 0) and stem(P, 1) != stem(P0, 1) and "-seed1-" in stem(P, 1)
+    for bad in ({"monoloco": {1: 3}}, {"known_dynamics": {1: 1}}, {"known_dynamics": {0: 3, 1: 3}}):
+        write_profile(path, load_profile(tiny_profile) | {"pend_book_restarts": bad})
+        with pytest.raises(ParameterError, match="pend_book_restarts"):
+            validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile(path)))
+
+    write_profile(path, load_profile(tiny_profile) | {"profile": "tiny", "pend_book_restarts": {"known_dynamics": {1: 3}}})
+    args = ["--profile", str(path), "--models", "known_dynamics", "--threads", "1"]
+    assert cli(["train", *args, "--study", "pendulum", "--protocol", "book", "--seeds", "1"]) == 0
+    out = tmp_path / "restarts.csv"
+    assert cli(["dynamics", *args, "--protocol", "book", "--restarts", str(out)]) == 0
+    import pandas as pd
+    table = pd.read_csv(out)
+    assert table[["slot", "training_seed", "used"]].values.tolist() == [[0, 0, True], [1, 1, False], [1, 3, True]]
+    trained = table.set_index("training_seed")
+    assert trained.loc[3, "r_level_spearman"] == trained.loc[3, "r_level_spearman"]       # measured (not NaN)
+    assert trained.loc[[0, 1], "r_level_spearman"].isna().all() and not trained["failed"].any()  # never trained

@@ -163,12 +163,24 @@ def dynamics(argv: list[str]) -> int:
                     help="also the dissection (drfkit.study.dissection): variances against their errors per noise "
                          "level and the interventions; name no_dynamics among --models for the verdict's yardstick")
     ap.add_argument("--csv", default=None, help="with --dissect: write the interventions table here")
+    ap.add_argument("--restarts", default=None, metavar="CSV",
+                    help="only the validation-only restart rule on each --models kind's runs (every seed slot, the "
+                         "replaced run too), written here (drfkit.study.dissection.restart_check)")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
     P = for_command("02_pendulum_dynamics", args.profile)
     if P is None:
         return 2
     setup(args.threads, P.seeds[0], "cpu")
+    if args.restarts:
+        from drfkit.study.dissection import restart_check
+        from drfkit.util.io import atomic_write_csv
+
+        table = pd.concat([restart_check(P, kind, args.protocol).assign(model=kind) for kind in args.models])
+        with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
+            print(table.to_string(index=False))
+        atomic_write_csv(args.restarts, table)
+        return 0
     models = {}
     for kind in args.models:
         for seed in args.seeds:

@@ -144,6 +144,42 @@ def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_l
     return screen_choice(means.join(table.groupby("variant", sort=False).size().rename("n_seeds"))).reset_index()
 
 
+def restart_check(P, kind: str, protocol: str = "book") -> pd.DataFrame:
+    """The validation-only restart rule on a profile's runs of ``kind``: per seed slot of ``P.seeds``, the run trained
+    from the slot's own seed and, where the protocol's ``restarts`` replace it, the run trained from the replacement,
+    each with ``dissection.in_distribution_screen`` on the VALIDATION split at the training noise (levels <= it;
+    never the OOD level or a blackout). Columns: slot, training_seed, checkpoint, r_level_spearman, r_log_slope,
+    gain_slope, mae, failed (rho < FAILED_SEED_SPEARMAN), used (the run the book's tables read). A run whose
+    checkpoint is absent has NaN statistics (a replaced seed's run need not be kept)."""
+    import dataclasses
+
+    from drfkit.methods.train import load_checkpoint
+    from drfkit.study.pendulum_runs import pendulum_split, training_seed
+
+    section = getattr(P.pendulum, protocol)
+    unreplaced = dataclasses.replace(P, pendulum=dataclasses.replace(
+        P.pendulum, **{protocol: dataclasses.replace(section, restarts={})}))
+    level = P.pendulum.train_max_noise
+    val = pendulum_split(P, "val", level)
+    rows = []
+    for slot in P.seeds:
+        used = training_seed(P, kind, slot, protocol)
+        for seed, profile in {slot: unreplaced, used: P}.items():
+            stem = studies.checkpoint_stem(profile, "pendulum", kind, slot, protocol)
+            row = {"slot": slot, "training_seed": seed, "checkpoint": stem.name, "used": seed == used}
+            best = stem.parent / f"{stem.name}-best.pt"
+            if best.exists():
+                model = load_checkpoint(best)
+                w, r, truth = _prepared(model, val)
+                trace = dis.filter_pass(model, w, r, truth, val["targets"])
+                row |= dis.in_distribution_screen(trace, val["noise"], max_level=level)
+            rows.append(row)
+    table = pd.DataFrame(rows)
+    if "r_level_spearman" not in table:
+        table["r_level_spearman"] = np.nan
+    return table.assign(failed=table["r_level_spearman"] < FAILED_SEED_SPEARMAN)
+
+
 def screen_choice(means: pd.DataFrame) -> pd.DataFrame:
     """The screen's rule on seed means indexed by variant (r_level_spearman, gain_slope, mae): adds
     'eligible' and 'chosen' (at most one row; none when no variant is eligible)."""
@@ -168,4 +204,5 @@ def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
 
 
-__all__ = ["FAILED_SEED_SPEARMAN", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters", "screen_choice", "screen_variants"]
+__all__ = ["FAILED_SEED_SPEARMAN", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters",
+           "restart_check", "screen_choice", "screen_variants"]

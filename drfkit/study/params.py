@@ -34,7 +34,8 @@ _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences
               "pend_train_max_noise", "pend_eval_max_noise", "pend_sweep_max_noise", "pend_data_seed",
               "pend_test_seed"]
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
-               "pend_book_models", "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience"]
+               "pend_book_models", "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience",
+               "pend_book_restarts"]
 _DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "ablation_round2_budget",
              "ablation_round2_variants", "ablation_round2_seeds", "regime_train_noise",
              "regime_seeds", "regime_test_sequences", "ablation_round3_budget", "ablation_round3_variants",

@@ -108,7 +108,17 @@ def pendulum_train_config(P, kind: str, seed: int, protocol: str = "paper") -> T
     schedule = {k: getattr(getattr(P.pendulum, protocol), k) for k in PROFILE_SCHEDULE}
     if recipe.get("mse_warmup") == "half":
         recipe["mse_warmup"] = schedule["epochs"] // 2
-    return TrainConfig(seed=seed, **schedule, **recipe)
+    return TrainConfig(seed=training_seed(P, kind, seed, protocol), **schedule, **recipe)
+
+
+def training_seed(P, kind: str, seed: int, protocol: str) -> int:
+    """The seed the run in ``seed``'s slot trains from: ``seed`` itself, unless the protocol's ``restarts`` replace
+    it (the validation-only restart rule: a seed whose run failed the rule is retrained from the next unused seed,
+    and the tables keep the slot's number so that every model has the profile's seeds)."""
+    if protocol == "paper":  # the paper's protocol is the benchmark's: no restarts
+        return int(seed)
+    restarts = getattr(P.pendulum, protocol).restarts
+    return int(restarts.get(kind, {}).get(seed, seed))
 
 
 def pendulum_fresh_training(P, protocol: str, noise: Noise | float | None = None):
@@ -138,5 +148,5 @@ PENDULUM = Study(
     target_unit="(cos θ, sin θ)")
 
 __all__ = ["PENDULUM", "PROFILE_SCHEDULE", "SPLIT_SEED_OFFSET", "split_seed", "pendulum_data", "pendulum_data_key",
-           "pendulum_fresh_training", "pendulum_model_options", "pendulum_split", "pendulum_train_config",
+           "pendulum_fresh_training", "pendulum_model_options", "pendulum_split", "pendulum_train_config", "training_seed",
            "recipe_fields"]

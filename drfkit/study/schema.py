@@ -77,6 +77,14 @@ def _paper_protocols(v: list[str]) -> bool:
     return "paper" in v and _names(v)
 
 
+def _restarts(v: dict) -> bool:
+    """{kind: {slot seed: training seed}}: kinds of the book's protocol, seeds integers >= 0, no slot its own."""
+    def seeds(m) -> bool:
+        return isinstance(m, dict) and all(isinstance(k, int) and isinstance(t, int) and 0 <= k != t >= 0
+                                           for k, t in m.items()) and len(set(m.values())) == len(m)
+    return all(kind in PROTOCOLS["book"] and seeds(m) for kind, m in v.items())
+
+
 _POSITIVE = ("an integer >= 1", lambda v: v >= 1)
 _RATE = ("a number in (0, 1)", lambda v: 0 < v < 1)
 _LEVELS = "a non-empty list of numbers in [0, 1]"
@@ -121,6 +129,10 @@ SCHEMA = Section("", {
             "lr": Spec(float, *_RATE),
             "patience": Spec(int, "an integer >= 0 (0 = train every epoch)", lambda v: v >= 0,
                              "stop a book-protocol run after this many epochs without a better validation NLL"),
+            "restarts": Spec(dict, "a mapping from a model kind to {seed: the seed it is trained from instead}, "
+                             "e.g. {known_dynamics: {1: 3}}; {} for none", _restarts,
+                             "the validation-only restart rule's replacements: the run in a seed's slot trains from "
+                             "another seed (drfkit.study.pendulum_runs.training_seed)"),
         }, "the book's training protocol (drfkit.methods.protocols)"),
     }, "the noisy pendulum: data, then training under the paper's protocol"),
     "dynamics": Section("", {
