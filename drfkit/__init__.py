@@ -5,7 +5,7 @@ Packages by layer; a module imports only from its own layer and the layers below
 
 ``util`` (files, paths, progress, device) -> ``core`` (Kalman filter, metrics) -> ``data``
 (pendulum, pedestrians, nuScenes, noise) -> ``models`` (DRF, no_dynamics, LSTM, Monoloco) ->
-``methods`` (training, uncertainty, gating, diagnostics, oracle, timing: explicit arguments) ->
+``methods`` (training, uncertainty, gating, diagnostics, references, timing: explicit arguments) ->
 ``study`` (the registry, the profile's schema, each study's data, runs and evaluation, the paper's
 numbers and the claims: the readers of the profile) -> ``report`` (figures, tables, the results
 text) -> ``book`` (notebook start-up, the pipeline, the grid, the manifest, the commands).

@@ -194,12 +194,12 @@ def test_filter_mechanism_and_coasting_verdicts():
     assert claims.f1_filter_mechanism(mech(0.05, 0.92, 7.9), 0.75)["verdict"] == claims.NOT
 
     def dark(drf):
-        return pd.DataFrame({"model": ["drf", "lstm", "no_dynamics", "physics_bound"], "seed": [0] * 4,
+        return pd.DataFrame({"model": ["drf", "lstm", "no_dynamics", "physics_reference"], "seed": [0] * 4,
                              "mae_blackout": [drf, 0.5, 0.6, 0.03]})
     assert claims.f2_blackout_coasting(dark(0.08), 0.03)["verdict"] == claims.REPRODUCED
     assert claims.f2_blackout_coasting(dark(0.3), 0.03, chance=0.637)["verdict"] == claims.PARTLY
     row = claims.f2_blackout_coasting(dark(0.55), 0.03)
-    assert row["verdict"] == claims.NOT and "physics_bound" not in row["ours"] and "reference" in row["ours"]
+    assert row["verdict"] == claims.NOT and "physics_reference" not in row["ours"] and "reference" in row["ours"]
     assert " bound " not in row["ours"].replace("not a bound", "")  # the particle filter is never called a bound
 
 

@@ -1,5 +1,5 @@
 """Does the filter filter? The book's protocol options (basis transition, memory dims, log r),
-the mechanism diagnostics and the physics bounds, on small cases with known answers."""
+the mechanism diagnostics and the true-physics references, on small cases with known answers."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from drfkit.data.noise import Noise
-from drfkit.methods import diagnostics, oracle
+from drfkit.methods import diagnostics, references
 from drfkit.data import pendulum as pend
 from drfkit.core.filter import kalman_predict, kalman_update
 from drfkit.models import build_model, default_config
@@ -204,12 +204,12 @@ def test_blackouts_replace_only_their_frames_with_pure_noise():
         pend.with_blackout(arrays, 15, 25, seed=0)
 
 
-# ----------------------------------------------------------------------------- bounds
+# ----------------------------------------------------------------------------- references
 def test_rk4_propagation_matches_the_generator():
     th0 = np.linspace(-3.0, 3.0, 13)
     theta, vel = pend._simulate(th0, 3, None, transition_noise_std=0.0)
-    t1, v1 = oracle.pendulum_propagate(theta[:, 0], vel[:, 0])
-    t2, v2 = oracle.pendulum_propagate(t1, v1)
+    t1, v1 = references.pendulum_propagate(theta[:, 0], vel[:, 0])
+    t2, v2 = references.pendulum_propagate(t1, v1)
     assert np.abs(np.angle(np.exp(1j * (t2 - theta[:, 2])))).max() < 1e-3
     assert np.abs(v2 - vel[:, 2]).max() < 1e-2
 
@@ -220,15 +220,15 @@ def test_particle_filter_recovers_a_known_trajectory():
     truth = np.stack([np.cos(theta), np.sin(theta)], -1)
     sigma = np.full(truth.shape, 0.3)
     obs = truth + rng.normal(0.0, 0.3, truth.shape)
-    est = oracle.pendulum_particle_filter(obs, sigma, n_particles=400, seed=0)
+    est = references.pendulum_particle_filter(obs, sigma, n_particles=400, seed=0)
     assert np.abs(est - truth)[:, 10:].mean() < 0.3 * np.abs(obs - truth)[:, 10:].mean()
     # pure-noise observations in the middle (huge sigma): the physics carries the state
     sigma[:, 20:30] = 1e3
     obs[:, 20:30] = rng.uniform(-1, 1, obs[:, 20:30].shape)
-    est = oracle.pendulum_particle_filter(obs, sigma, n_particles=400, seed=0)
+    est = references.pendulum_particle_filter(obs, sigma, n_particles=400, seed=0)
     assert np.abs(est - truth)[:, 20:30].mean() < 0.15
     with pytest.raises(ValueError, match=r"\(N, T, 2\)"):
-        oracle.pendulum_particle_filter(obs[..., :1], sigma[..., :1])
+        references.pendulum_particle_filter(obs[..., :1], sigma[..., :1])
 
 
 def test_the_references_calibration_grid_widens_until_its_choice_is_interior():
@@ -237,10 +237,10 @@ def test_the_references_calibration_grid_widens_until_its_choice_is_interior():
     theta, _ = pend._simulate(rng.uniform(-np.pi, np.pi, 12), 30, np.random.default_rng(1))
     truth = np.stack([np.cos(theta), np.sin(theta)], -1)
     obs = truth + rng.normal(0.0, 0.3, truth.shape)
-    cal = oracle.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0)
+    cal = references.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0)
     assert cal["sigma_scale"] >= 4.0 and cal["interior"]
     # with no room to widen, a choice at the grid's edge says so
-    edge = oracle.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0,
+    edge = references.calibrate_particle_filter(obs, np.full(truth.shape, 0.05), truth, n_particles=100, seed=0,
                                             max_widen=0)
     assert edge["sigma_scale"] == 2.0 and not edge["interior"]
 
@@ -248,12 +248,12 @@ def test_the_references_calibration_grid_widens_until_its_choice_is_interior():
 def test_template_matching_reads_clean_and_noisy_frames():
     theta = np.array([[-2.0, -0.5, 0.3, 1.7, 3.0]])
     clean = pend.render_pendulum(theta)
-    est = oracle.template_angles(clean, n_angles=1024)
+    est = references.template_angles(clean, n_angles=1024)
     # the benchmark's rod is drawn hard-edged on the 128-px canvas, so nearby angles can give the
     # same frame: the match is exact up to that plateau (under a degree), not up to the grid step
     assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 0.015
     noisy = pend.blend_uniform_noise(clean, np.full(theta.shape, 0.5), np.random.default_rng(0))
-    est = oracle.template_angles(noisy, n_angles=1024)
+    est = references.template_angles(noisy, n_angles=1024)
     assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 0.1
 
 
@@ -262,21 +262,22 @@ def test_constant_velocity_filter():
     rng = np.random.default_rng(0)
     x = 20 + np.cumsum(np.full((n, steps), 1.5 * dt), axis=1)                 # 1.5 m/s, exactly
     obs = x + rng.normal(0, 1.0, x.shape)
-    est = oracle.constant_velocity_filter(obs, np.ones_like(obs), dt=dt, accel_std=0.01)
+    est = references.constant_velocity_filter(obs, np.ones_like(obs), dt=dt, accel_std=0.01)
     assert np.abs(est - x)[:, 10:].mean() < 0.5 * np.abs(obs - x)[:, 10:].mean()
-    exact = oracle.constant_velocity_filter(obs, np.full_like(obs, 1e-6), dt=dt, accel_std=1.0)
+    exact = references.constant_velocity_filter(obs, np.full_like(obs, 1e-6), dt=dt, accel_std=1.0)
     assert np.allclose(exact, obs, atol=1e-4)
     # frames without an observation: the state moves on with its velocity
     seen = np.ones(obs.shape, bool)
     seen[:, 20:25] = False
-    gap = oracle.constant_velocity_filter(obs, np.ones_like(obs), seen, dt=np.full((n, steps - 1), dt), accel_std=0.01)
+    gap = references.constant_velocity_filter(obs, np.ones_like(obs), seen, dt=np.full((n, steps - 1), dt),
+                                              accel_std=0.01)
     assert np.allclose(np.diff(gap[:, 19:25], axis=1), np.diff(gap[:, 19:21], axis=1), atol=1e-9)
     assert np.abs(gap - x)[:, 20:25].mean() < 0.7 * np.abs(obs - x)[:, 20:25].mean()
     with pytest.raises(ValueError, match="observed"):
-        oracle.constant_velocity_filter(obs, np.ones_like(obs), seen[:, :5], dt=dt, accel_std=1.0)
+        references.constant_velocity_filter(obs, np.ones_like(obs), seen[:, :5], dt=dt, accel_std=1.0)
     seen[:, 0] = False
     with pytest.raises(ValueError, match="first frame"):
-        oracle.constant_velocity_filter(obs, np.ones_like(obs), seen, dt=dt, accel_std=1.0)
+        references.constant_velocity_filter(obs, np.ones_like(obs), seen, dt=dt, accel_std=1.0)
 
 
 def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
@@ -294,12 +295,12 @@ def test_mechanism_checks_take_a_noise_value_or_its_level(monkeypatch):
         dynamics.mechanism_table(P, {}, Noise("salt_and_pepper", 0.05))
 
 
-def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
-    """Like for like: the true-physics bound's blackout MAE is taken over the blackout frames alone,
-    as every model's (``blackout_table``); a bound averaged over all 75 frames fails this."""
+def test_the_reference_and_the_models_are_averaged_over_the_same_blackout_frames():
+    """Like for like: the true-physics reference's blackout MAE is taken over the blackout frames alone,
+    as every model's (``blackout_table``); a reference averaged over all 75 frames fails this."""
     from drfkit.data.noise import Noise
     from drfkit.data.pendulum import blackout_frames, generate_pendulum, with_blackout
-    from drfkit.study.dynamics import blackout_table, bound_on
+    from drfkit.study.dynamics import blackout_table, reference_on
 
     val = generate_pendulum(4, 60, Noise("rkn_uniform", 0.5), seed=5)
     dark = with_blackout(generate_pendulum(3, 60, Noise("rkn_uniform", 0.5), seed=6), *blackout_frames(60), seed=1)
@@ -309,11 +310,11 @@ def test_the_bound_and_the_models_are_averaged_over_the_same_blackout_frames():
         noisy = arrays["targets"] + rng.normal(0, 0.05, arrays["targets"].shape) * (1 + 20 * arrays["noise"][..., None])
         return noisy.astype(np.float32), np.full(arrays["targets"].shape, 0.1, np.float32)
 
-    table, curves = bound_on(predict, val, {"blackout": dark}, n_particles=50, seed=0)
-    bound = table.set_index("noise").loc["blackout"]
+    table, curves = reference_on(predict, val, {"blackout": dark}, n_particles=50, seed=0)
+    reference = table.set_index("noise").loc["blackout"]
     as_model = blackout_table(curves.assign(seed=0))
-    assert bound["mae"] == pytest.approx(float(as_model["mae_blackout"].iloc[0]), rel=1e-12)
-    assert bound["mae"] != pytest.approx(bound["mae_all_frames"], rel=1e-3)  # the frames do matter here
+    assert reference["mae"] == pytest.approx(float(as_model["mae_blackout"].iloc[0]), rel=1e-12)
+    assert reference["mae"] != pytest.approx(reference["mae_all_frames"], rel=1e-3)  # the frames do matter here
 
 
 def test_encoder_accuracy_check_draws_the_asked_accuracy_and_filters_it():
@@ -329,3 +330,32 @@ def test_encoder_accuracy_check_draws_the_asked_accuracy_and_filters_it():
     assert table.loc["fine", "sigma"] == pytest.approx(0.02 * math.sqrt(math.pi / 2))
     assert (table["filtered_mae"] < table["encoder_mae_drawn"]).all()
     assert table.loc["fine", "filtered_mae"] < table.loc["coarse", "filtered_mae"]
+
+
+def test_the_quantisation_effect_scores_each_storage_with_each_likelihood_and_every_model(monkeypatch):
+    """Rounded and truncated frames of the same draws, each scored by the limit with both likelihoods, and every model
+    by its dropout-off pass on both."""
+    from drfkit.data.pendulum import generate_pendulum
+    from drfkit.study import dynamics, studies
+    from drfkit.study.params import for_notebook, load_profile
+
+    P = for_notebook("02_pendulum_dynamics", load_profile("quick"))
+    asked = []
+
+    def split(P, name, noise=None):
+        asked.append((name, noise))
+        return generate_pendulum(3, 12, noise, 17)
+
+    monkeypatch.setattr(studies, "pendulum_split", split)
+    torch.manual_seed(0)
+    model = build_model(default_config("no_dynamics", "pendulum", 2)).train()
+    table = dynamics.quantisation_effect(P, {("no_dynamics", 0): model}, [0.75], n_sequences=2, n_particles=200)
+    assert asked == [("test", Noise("rkn_uniform", 0.75)), ("test", Noise("rkn_uniform_truncated", 0.75))]
+    assert model.training   # its mode restored
+    limit = table[table["estimator"] == "per_frame_bayes"].set_index(["frames", "likelihood"])["mae"]
+    assert len(limit) == 4 and (limit > 0).all()
+    for stored in ("round", "truncate"):       # each likelihood reads the frames differently (the MAE of 24 frames
+        assert limit[(stored, "round")] != limit[(stored, "truncate")]   # cannot rank them: the measurement does)
+    learned = table[table["estimator"] == "no_dynamics"]
+    assert sorted(learned["frames"]) == ["round", "truncate"] and learned["likelihood"].isna().all()
+    assert learned["mae"].nunique() == 2        # the frames differ, so does the output

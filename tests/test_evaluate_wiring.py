@@ -86,6 +86,27 @@ def test_evaluate_study_rows_carry_the_total_sigma_metrics(monkeypatch, tmp_path
     assert rows["mpiw"].tolist() == pytest.approx([2 * Z975 * 0.5] * 2)
 
 
+def test_a_sweep_level_on_fewer_sequences_is_scored_on_its_first_ones_and_says_so(monkeypatch, tmp_path):
+    """``sequences`` (level -> N) scores that level on the first N test sequences and records N; other levels keep
+    every sequence, and the calibration pass asks for the evaluation's batch size (one cache entry for both)."""
+    from drfkit.study import evaluate as ev
+
+    P, models = _stub_study(monkeypatch, tmp_path)
+    seen = []
+    real = ev.cached_predict_rates
+    monkeypatch.setattr(ev, "cached_predict_rates", lambda model, x, **k: seen.append((x.shape[0], k["batch_size"]))
+                        or real(model, x, **k))  # the stub's prediction: what reaches it is what is checked
+    rows = ev.evaluate_study(P, "pedestrians", [0.01, 0.05], models=models, sequences={0.05: 1}).set_index("noise")
+    assert rows.loc[0.01, "sequences"] == 2 and rows.loc[0.05, "sequences"] == 1
+    ev.calibration_points(P, "pedestrians", [0.05], models=models)
+    assert seen[0][0] == 2 and seen[1][0] == 1 and {b for _, b in seen} == {ev.EVAL_BATCH_SIZE}
+    data = SequenceData(torch.zeros(3, 2, 1), torch.zeros(3, 2, 1))
+    assert ev.first_sequences(data, None) is data and ev.first_sequences(data, 5) is data
+    assert len(ev.first_sequences(data, 2)) == 2
+    with pytest.raises(ValueError, match="at least one"):
+        ev.first_sequences(data, 0)
+
+
 def test_calibration_points_count_standardised_residuals_of_the_total_sigma(monkeypatch, tmp_path):
     """Residuals / total sigma on the real frames: 0.2, 1.0, 0.0, -1.0, -2.4; at the 50 % level the
     observed fraction at or below the median is 3/5, at 95 % (z 1.645) all five."""

@@ -296,7 +296,7 @@ def test_a_filter_that_declares_competency_gain_is_gated_and_one_that_does_not_i
     assert set(out["table"]["seed"]) == {0, 1} and set(out["table"]["setting"]) == set(gating.SETTINGS)
     assert set(out["sweep"]["method"]) == {"kalman_gain", "random", "oracle"}
     # the gate tuned at the training noise reads it off the study's registry entry (Study.train_level)
-    tuned = gating_study.train_noise_gates(P, "pendulum", models)
+    tuned = out["train_gate"]
     assert tuned["seed"].tolist() == [0, 1] and (tuned["val_noise"] == P.pendulum.train_max_noise).all()
     # without the declaration there is no gate, even for a model with a Kalman filter's gains
     val = studies.study_data(P, "pendulum", "val")

@@ -65,7 +65,7 @@ def _calibration_points(study, levels, models):
 def _regime_table():
     rows = []
     for tn in (0.5, 1.0):
-        for kind in PEND + ["physics_bound"]:
+        for kind in PEND + ["physics_reference"]:
             for seed in (0, 1):
                 rows += [{"train_noise": tn, "model": kind, "seed": seed, "test": f"{lv:g}", "test_noise": lv,
                           "mae": 0.01 + lv / 10} for lv in (0.0, 0.5, 1.0)]
@@ -80,7 +80,7 @@ def _blackout_curves():
         {"model": model, "seed": 0, "frame": frames, "mae": level * (1 + (frames >= 4) * (frames < 8)),
          "protocol": protocol})
     return pd.concat([curve("drf", "paper", 0.05), curve("no_dynamics", "paper", 0.06), curve("drf", "book", 0.04),
-                      curve("no_dynamics", "book", 0.06), curve("physics_bound", None, 0.01)], ignore_index=True)
+                      curve("no_dynamics", "book", 0.06), curve("physics_reference", None, 0.01)], ignore_index=True)
 
 
 def _history(models, selected_on_l1=(), epochs=30):
@@ -103,13 +103,13 @@ def _history(models, selected_on_l1=(), epochs=30):
 FIGURES = {
     "mae_bars": lambda: figures.plot_mae_bars(_sweep_summary(PEND, [0.5, 0.75], "pendulum"), PEND,
                                               {0.5: {"drf": 0.02}}, ylabel="MAE (cos θ, sin θ)",
-                                              level_name="max noise", bound={0.5: 0.01}),
+                                              level_name="max noise", reference={0.5: 0.01}),
     "picp_mpiw": lambda: figures.plot_picp_mpiw(_picp_curves(PEND, [0.5, 0.75]), PEND,
                                                 {"drf": [(1.0, 97.0), (2.0, 99.0)]}, level_name="max noise"),
     "sweep": lambda: figures.plot_sweep(_sweep_summary(PED, [0.0, 0.01, 0.05], "pedestrians"), PED, 0.01,
                                         metrics=("mae", "picp", "nll"), xlabel="salt-and-pepper p"),
     "calibration": lambda: figures.plot_calibration(_calibration_points("pendulum", [0.5, 0.75], PEND), PEND),
-    "blackout": lambda: figures.plot_blackout(_blackout_curves(), (4, 8), ["drf", "no_dynamics", "physics_bound"]),
+    "blackout": lambda: figures.plot_blackout(_blackout_curves(), (4, 8), ["drf", "no_dynamics", "physics_reference"]),
     "regime": lambda: figures.plot_regime(_regime_table(), PEND),
     "training_curves": lambda: figures.plot_training_curves(_history(PEND)),
     "training_curves_l1": lambda: figures.plot_training_curves(_history(PED, selected_on_l1=("monoloco",))),

@@ -174,18 +174,20 @@ def test_study_chooses_the_gate_without_reading_test_data(monkeypatch):
         return fake_data(P, split, registry.study(study).noise(noise, P), protocol)
 
     monkeypatch.setattr(studies, "study_data", fake_study_data)
-    P = build_profile(dict(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4, gating_picp_tolerance=0.01,
                            gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95), "a test")
     out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): tiny_drf(), ("lstm", 0): None},
                                     min_run_time=0.001)
-    assert [(split, noise.level) for split, noise in served] == [("val", 0.05), ("test", 0.05)]
-    assert [kind for kind, _ in recorded] == ["direction", "threshold"]
+    # the gate at the test noise, the test set, the gate at the training noise: each fit on validation alone
+    assert [(split, noise.level) for split, noise in served] == [("val", 0.05), ("test", 0.05), ("val", 0.01)]
+    assert [kind for kind, _ in recorded] == ["direction", "threshold"] * 2
     for _, args in recorded:
         for a in args:
             for arr in (a if isinstance(a, tuple) else (a,)):
                 assert np.abs(np.asarray(arr)).max() < 500, "a test array reached the gate's choice"
     val_targets = val.targets[val.mask].numpy()
     np.testing.assert_allclose(recorded[1][1][1], val_targets)
+    np.testing.assert_allclose(recorded[3][1][1], val_targets)
     # the test set was used afterwards (sentinel targets: nothing is covered)
     assert (out["table"]["picp"] == 0).all() and set(out["table"]["seed"]) == {0}
 
@@ -208,7 +210,7 @@ def test_the_study_without_its_sweep_keeps_the_settings_metrics_and_times_only_t
         return real_measure(fns, *args, **kwargs)
 
     monkeypatch.setattr("drfkit.methods.gate_evaluation.measure_interleaved", counting)
-    P = build_profile(dict(ped_eval_p=[0.01, 0.05], device="cpu", n_samples=4, gating_picp_tolerance=0.01,
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4, gating_picp_tolerance=0.01,
                            gating_sweep_points=3, gating_timing_frames=0, interval_level=0.95), "a test")
     models = {("drf", 0): tiny_drf()}
     full = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001)
@@ -219,7 +221,48 @@ def test_the_study_without_its_sweep_keeps_the_settings_metrics_and_times_only_t
     assert list(alone["sweep"].columns[:4]) == ["study", "seed", "noise", "val_noise"]
     metrics = ["setting", "threshold", "fraction", "n_selected", "picp", "mpiw", "nll", "mae"]
     pd.testing.assert_frame_equal(alone["table"][metrics], full["table"][metrics])
-    assert timed[0] == {"no_dropout", "always", "kalman_gain", "random"} and n_full > len(timed[0])
+    assert timed[0] == {"no_dropout", "always", "kalman_gain", "random", "kalman_gain@train", "random@train"}
+    assert n_full > len(timed[0])
+
+
+def test_the_training_noise_gate_is_evaluated_and_timed_in_the_first_gates_pass(monkeypatch):
+    """One pass of the test set per seed: the gate tuned at the training noise is fit on validation at that noise,
+    its rows come from the same passes (no_dropout and always are the first table's own) and are timed in the
+    same interleaved run; its table matches evaluating that gate on its own."""
+    import pandas as pd
+
+    from drfkit.methods import gate_evaluation as ge
+    from drfkit.study import studies
+
+    val_test, val_train, test = keypoint_data(seed=11), keypoint_data(seed=13), keypoint_data(seed=12)
+    served = []
+
+    def data(P, study, split, noise=None, protocol="paper"):
+        served.append((split, noise))
+        return test if split == "test" else (val_train if noise == 0.01 else val_test)
+
+    monkeypatch.setattr(studies, "study_data", data)
+    passes = []
+    real_stage = ge.uncertainty_stage
+    monkeypatch.setattr(ge, "uncertainty_stage", lambda *a, **k: passes.append(1) or real_stage(*a, **k))
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4,
+                           gating_picp_tolerance=0.01, gating_sweep_points=3, gating_timing_frames=0,
+                           interval_level=0.95), "a test")
+    model = tiny_drf()
+    out = gating_study.gating_study(P, "pedestrians", models={("drf", 0): model}, min_run_time=0.001, sweep=False)
+    assert sorted(served) == [("test", 0.05), ("val", 0.01), ("val", 0.05)]  # each split read once
+    train, first = out["table_train"].set_index("setting"), out["table"].set_index("setting")
+    assert set(train.index) == set(first.index) == set(gating.SETTINGS)
+    assert (train["val_noise"] == 0.01).all() and (first["val_noise"] == 0.05).all()
+    for shared in ("no_dropout", "always"):
+        assert train.loc[shared, ["picp", "time_ms", "head_ms"]].tolist() == first.loc[shared, ["picp", "time_ms", "head_ms"]].tolist()
+    gate_train, _ = gating.fit_gate(model, val_train, n_samples=4, tolerance=0.01, n_points=3, seed=0)
+    alone = ge.evaluate_gate(model, gate_train, test, n_samples=4, seed=0, min_run_time=0.001).set_index("setting")
+    metrics = ["threshold", "fraction", "picp", "mpiw", "nll", "mae"]
+    pd.testing.assert_frame_equal(train.loc[list(gating.SETTINGS), metrics], alone.loc[list(gating.SETTINGS), metrics])
+    row = out["train_gate"].iloc[0]
+    assert row["val_noise"] == 0.01 and row["test_fraction"] == train.loc["kalman_gain", "fraction"]
+    assert row["direction"] == gate_train.direction and row["val_fraction"] == gate_train.val_fraction
 
 
 # --------------------------------------------------------------------------- gated inference

@@ -6,7 +6,7 @@ import torch
 from drfkit.core.filter import ekf_update, kalman_update
 from drfkit.data import pendulum as pend
 from drfkit.methods.objectives import batch_loss
-from drfkit.methods.oracle import pendulum_propagate
+from drfkit.methods.references import pendulum_propagate
 from drfkit.models import build_model
 from drfkit.models.known_dynamics import pendulum_step
 

@@ -132,8 +132,9 @@ def test_the_regime_paragraph_states_only_what_its_summary_table_shows():
     # "through the blackout it is no better than no_dynamics"
     assert row.loc["blackout", "drf"] >= row.loc["blackout", "no_dynamics"]
     # "the known-dynamics filter and the particle filter on no_dynamics' outputs are the only models that coast"
-    coast = {m for m in ("drf", "no_dynamics", "lstm", "known_dynamics", "physics_bound") if row.loc["blackout", m] <= 0.10}
-    assert coast == {"known_dynamics", "physics_bound"}
+    coast = {m for m in ("drf", "no_dynamics", "lstm", "known_dynamics", "physics_reference")
+             if row.loc["blackout", m] <= 0.10}
+    assert coast == {"known_dynamics", "physics_reference"}
 
 
 def test_the_calibrated_gain_screen_in_docs_is_its_committed_table():

@@ -35,7 +35,7 @@ def tiny_map(tmp_path_factory):
 
 def test_map_has_every_model_level_and_the_blackout(tiny_map):
     _, table = tiny_map
-    assert set(table["model"]) == set(REGIME_BASES) | {"physics_bound"}
+    assert set(table["model"]) == set(REGIME_BASES) | {"physics_reference"}
     for _, rows in table.groupby("model"):
         assert sorted(rows["test"]) == sorted([f"{lv:g}" for lv in LEVELS] + ["blackout", "after_blackout"])
     assert table["mae"].between(0, 2).all()
@@ -71,7 +71,7 @@ def test_summary_ratios_follow_the_rows(tiny_map):
     row = summary.loc[(0.5, "0.5")]
     mae = table[(table["test"] == "0.5")].set_index("model")["mae"]
     assert row["drf_over_no_dynamics"] == pytest.approx(mae["drf"] / mae["no_dynamics"])
-    assert row["drf_over_bound"] == pytest.approx(mae["drf"] / mae["physics_bound"])
+    assert row["drf_over_reference"] == pytest.approx(mae["drf"] / mae["physics_reference"])
 
 
 def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
@@ -85,9 +85,9 @@ def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
     assert len(fig.axes) == 2
 
 
-def test_bound_row_records_its_calibration(tiny_map):
+def test_reference_row_records_its_calibration(tiny_map):
     out, _ = tiny_map
-    row = json.loads((out / "tiny" / "regime" / "physics_bound-train0.5-seed0.json").read_text())
+    row = json.loads((out / "tiny" / "regime" / "physics_reference-train0.5-seed0.json").read_text())
     assert row["sigma_scale"] > 0 and 0 <= row["outlier"] < 1 and row["n_particles"] == 30
 
 
@@ -109,5 +109,5 @@ def test_the_paper_profile_finds_every_regime_row_committed(monkeypatch):
     monkeypatch.setattr(regime, "_model", refuse)
     P = for_notebook("02_pendulum_dynamics", load_profile("paper"))
     table = regime.profile_map(P)
-    assert set(table["model"]) == {*REGIME_BASES, "physics_bound"}
+    assert set(table["model"]) == {*REGIME_BASES, "physics_reference"}
     assert set(table["train_noise"]) == set(map(float, P.dynamics.regime.train_noise))

@@ -1,5 +1,6 @@
 """The README's results section is built from results/<profile>/ only."""
 import json
+from pathlib import Path
 
 import pandas as pd
 
@@ -112,7 +113,7 @@ def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, mon
     assert "status interrupted: killed during 06_competency_gating" in text and "None s" not in text
 
 
-def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path):
+def test_dynamics_lines_show_both_protocols_the_reference_and_the_ablation(tmp_path):
     from drfkit.report.writers import dynamics_lines
 
     assert dynamics_lines(tmp_path) == []
@@ -121,14 +122,15 @@ def test_dynamics_lines_show_both_protocols_the_bound_and_the_ablation(tmp_path)
                   "gain_ratio_blackout": [0.92, 0.2], "prior_ratio": [7.9, 0.7]}).to_csv(tmp_path / "pendulum_protocols.csv",
                                                                                        index=False)
     pd.DataFrame({"seed": [0, 0], "noise": ["0.5", "blackout"], "mae": [0.006, 0.033]}).to_csv(
-        tmp_path / "pendulum_physics_bound.csv", index=False)
+        tmp_path / "pendulum_physics_reference.csv", index=False)
     text = "\n".join(dynamics_lines(tmp_path))
     assert "| paper | DRF (ours) | 0.0200 | 0.5500 | 0.05 | 0.92 | 7.90 |" in text
     assert "| book | DRF (ours) | 0.0100 | 0.0800 | 0.90 | 0.20 | 0.70 |" in text
     assert "| — | true-physics reference on its no_dynamics | 0.0060 | 0.0330 |" in text
-    # each protocol's bound on its own no_dynamics, once notebook 02 has written them (like for like)
+    # each protocol's reference on its own no_dynamics, once notebook 02 has written them (like for like)
     pd.DataFrame({"protocol": ["paper", "paper", "book", "book"], "seed": [0] * 4, "noise": ["0.5", "blackout"] * 2,
-                  "mae": [0.006, 0.033, 0.004, 0.021]}).to_csv(tmp_path / "pendulum_physics_bound_protocols.csv", index=False)
+                  "mae": [0.006, 0.033, 0.004, 0.021]}).to_csv(tmp_path / "pendulum_physics_reference_protocols.csv",
+                                                               index=False)
     text = "\n".join(dynamics_lines(tmp_path))
     assert "| paper | true-physics reference on its no_dynamics | 0.0060 | 0.0330 |" in text
     assert "| book | true-physics reference on its no_dynamics | 0.0040 | 0.0210 |" in text and "| — |" not in text
@@ -146,8 +148,8 @@ def test_dynamics_lines_show_the_regime_map(tmp_path):
 
     rows = [{"train_noise": tn, "model": m, "seed": 0, "test": "0.75", "test_noise": 0.75, "mae": mae}
             for tn, m, mae in [(0.5, "drf", 0.04), (0.5, "lstm", 0.05), (0.5, "no_dynamics", 0.08),
-                               (0.5, "physics_bound", 0.02), (1.0, "drf", 0.03), (1.0, "lstm", 0.03),
-                               (1.0, "no_dynamics", 0.06), (1.0, "physics_bound", 0.015)]]
+                               (0.5, "physics_reference", 0.02), (1.0, "drf", 0.03), (1.0, "lstm", 0.03),
+                               (1.0, "no_dynamics", 0.06), (1.0, "physics_reference", 0.015)]]
     regime_summary(pd.DataFrame(rows)).to_csv(tmp_path / "pendulum_regime_summary.csv", index=False)
     text = "\n".join(dynamics_lines(tmp_path))
     # the model columns are the kinds the map holds, in the registry's order, under their display labels
@@ -194,9 +196,10 @@ def test_readme_section_links_claims_md_and_report_md_where_they_are(tmp_path, m
 
 
 def test_every_claim_links_evidence_that_the_paper_profile_has():
-    """The claim map names files the committed paper profile holds (a renamed table or figure fails)."""
+    """The claim map names files the committed paper profile holds (a renamed table or figure fails, unless
+    ``named_result`` finds it under the name it had before the rename)."""
     from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
-    from drfkit.util.paths import REPO_ROOT
+    from drfkit.util.paths import REPO_ROOT, named_result
 
     assert set(CLAIM_EVIDENCE) == set(CLAIM_SOURCES)
     root = REPO_ROOT / "results" / "paper"
@@ -204,12 +207,46 @@ def test_every_claim_links_evidence_that_the_paper_profile_has():
         assert (root / "executed" / f"{notebook}.ipynb").exists(), cid
         assert f"## {section}" in (REPO_ROOT / "notebooks" / "src" / f"{notebook}.py").read_text(), (cid, section)
         for name in tables:
-            assert (root / "tables" / name).exists(), (cid, name)
+            assert named_result(root / "tables", Path(name).stem, Path(name).suffix).exists(), (cid, name)
         for name in figures:
-            assert (root / "figures" / name).exists(), (cid, name)
+            assert named_result(root / "figures", Path(name).stem, Path(name).suffix).exists(), (cid, name)
 
 
-def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
+def test_a_table_or_figure_made_before_the_rename_is_read_until_one_of_the_new_name_exists(tmp_path, monkeypatch):
+    """``named_result``: the old-named file where only it exists, the new one once both do (or neither does), for
+    the claims' tables (``judge.Tables``), the claims' evidence links and the README's figures."""
+    from types import SimpleNamespace
+
+    from drfkit.report.writers import figure_lines
+    from drfkit.study.claims.judge import Tables
+    from drfkit.util.paths import named_result
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+    tables, figures = tmp_path / "p" / "tables", tmp_path / "p" / "figures"
+    tables.mkdir(parents=True), figures.mkdir()
+    old = tables / "pendulum_physics_bound_protocols.csv"
+    pd.DataFrame({"protocol": ["paper"], "noise": ["blackout"], "mae": [0.03]}).to_csv(old, index=False)
+    assert named_result(tables, "pendulum_physics_reference_protocols") == old
+    assert Tables(SimpleNamespace(profile="p")).read("pendulum_physics_reference_protocols")["mae"].tolist() == [0.03]
+    assert "(tables/pendulum_physics_bound_protocols.csv)" in claims.evidence_links("F2", folder=tmp_path / "p")
+    new = tables / "pendulum_physics_reference_protocols.csv"
+    pd.DataFrame({"protocol": ["paper"], "noise": ["blackout"], "mae": [0.02]}).to_csv(new, index=False)
+    assert named_result(tables, "pendulum_physics_reference_protocols") == new
+    assert Tables(SimpleNamespace(profile="p")).read("pendulum_physics_reference_protocols")["mae"].tolist() == [0.02]
+    assert "(tables/pendulum_physics_reference_protocols.csv)" in claims.evidence_links("F2", folder=tmp_path / "p")
+    # neither file, or a name never renamed: the name itself (what a writer writes)
+    assert named_result(tables, "pedestrians_reference") == tables / "pedestrians_reference.csv"
+    assert named_result(tables, "pendulum_protocols") == tables / "pendulum_protocols.csv"
+    # the README's figure links the file there is
+    (figures / "pendulum_mae_with_bound.png").write_bytes(b"png")
+    linked = "\n".join(figure_lines("p", ["pendulum_mae_with_reference"], "make reproduce", "results/p/"))
+    assert "(results/p/figures/pendulum_mae_with_bound.png)" in linked
+    (figures / "pendulum_mae_with_reference.png").write_bytes(b"png")
+    linked = "\n".join(figure_lines("p", ["pendulum_mae_with_reference"], "make reproduce", "results/p/"))
+    assert "(results/p/figures/pendulum_mae_with_reference.png)" in linked and "_bound" not in linked
+
+
+def test_blackout_figure_draws_one_panel_per_protocol_with_the_reference_in_each():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -218,14 +255,14 @@ def test_blackout_figure_draws_one_panel_per_protocol_with_the_bound_in_each():
     frames = list(range(10))
     curve = lambda model, protocol, level: pd.DataFrame(  # noqa: E731
         {"model": model, "seed": 0, "frame": frames, "mae": level, "protocol": protocol})
-    curves = pd.concat([curve("drf", "paper", 0.5), curve("drf", "book", 0.1), curve("physics_bound", None, 0.02)])
-    fig = plot_blackout(curves, (3, 6), ["drf", "physics_bound"])
+    curves = pd.concat([curve("drf", "paper", 0.5), curve("drf", "book", 0.1), curve("physics_reference", None, 0.02)])
+    fig = plot_blackout(curves, (3, 6), ["drf", "physics_reference"])
     axes = fig.axes
     assert [ax.get_title() for ax in axes] == ["paper protocol", "book protocol"]
     for ax, level in zip(axes, (0.5, 0.1)):
         lines = {line.get_label(): line.get_ydata() for line in ax.get_lines()}
         assert len(lines) == 2 and any((y == level).all() for y in lines.values())
-        assert any((y == 0.02).all() for y in lines.values())  # the bound in every panel
+        assert any((y == 0.02).all() for y in lines.values())  # the reference in every panel
     assert axes[0].get_ylim() == axes[1].get_ylim()
     single = plot_blackout(curves.drop(columns="protocol").query("model != 'drf' or mae == 0.5"), (3, 6), ["drf"])
     assert len(single.axes) == 1 and single.axes[0].get_title() == ""

@@ -47,6 +47,8 @@ from drfkit.util.registry import Registry
 # kind -> what its level means
 NOISE_KINDS: Registry = Registry("noise kind", {
     "rkn_uniform": "max noise of the RKN pendulum blend with uniform pixel noise (0 clean, 1 the benchmark)",
+    "rkn_uniform_truncated": "rkn_uniform with each blended pixel truncated to an integer, as the benchmark's code "
+                             "stores it, where rkn_uniform rounds (the same seed draws the same frames otherwise)",
     "salt_and_pepper": "probability that a pixel is replaced by black or white",
 })
 
@@ -114,16 +116,22 @@ def rkn_noise_factors(n_sequences: int, seq_len: int, rng: np.random.Generator) 
     return factors
 
 
+QUANTISERS = {"round": np.rint, "truncate": np.floor}  # the blend is >= 0, so floor is truncation
+
+
 def blend_uniform_noise(
-    images: np.ndarray, noise_level: np.ndarray, rng: np.random.Generator
+    images: np.ndarray, noise_level: np.ndarray, rng: np.random.Generator, quantise: str = "round"
 ) -> np.ndarray:
     """Convex blend with per-pixel uniform noise: ``(1 - n) * image + n * U(0, 255)``.
 
     images: uint8 (..., H, W). noise_level: (...) in [0, 1], one level n per image
     (n = 0 returns the image, n = 1 pure noise independent of the image).
-    Returns uint8 (..., H, W), rounded to the nearest integer. The noise is drawn for
-    every pixel whatever n is, so the stream of random numbers does not depend on n.
+    Returns uint8 (..., H, W): rounded to the nearest integer (``quantise="round"``, the book's), or
+    truncated (``"truncate"``, what the benchmark's code does when it stores the blend in a uint8 array).
+    The noise is drawn for every pixel whatever n is, so the stream of random numbers does not depend on n.
     """
+    if quantise not in QUANTISERS:
+        raise ValueError(f"quantise must be one of {sorted(QUANTISERS)}, got {quantise!r}")
     images = np.asarray(images)
     if images.dtype != np.uint8:
         raise TypeError(f"images must be uint8 (0..255), got dtype {images.dtype}; convert with .astype(np.uint8)")
@@ -140,7 +148,7 @@ def blend_uniform_noise(
     noise = rng.random(size=images.shape, dtype=np.float32) * np.float32(255.0)
     n = level.astype(np.float32)[..., None, None]
     blended = (np.float32(1.0) - n) * images + n * noise
-    return np.clip(np.rint(blended), 0, 255).astype(np.uint8)
+    return np.clip(QUANTISERS[quantise](blended), 0, 255).astype(np.uint8)
 
 
 def salt_and_pepper(

@@ -108,16 +108,18 @@ def generate_pendulum(n_sequences: int, seq_len: int, noise: Noise, seed: int) -
     }
 
 
-def _corrupt(clean: np.ndarray, max_noise: float, factor_rng, pixel_rng) -> tuple[np.ndarray, np.ndarray]:
+def _corrupt(clean: np.ndarray, max_noise: float, factor_rng, pixel_rng, quantise: str = "round"
+             ) -> tuple[np.ndarray, np.ndarray]:
     """(noisy images uint8 (N, T, 24, 24), levels float32 (N, T)) of clean frames: the benchmark's
-    clean-factor walk rescaled to [0, max_noise], then the blend with uniform pixel noise."""
+    clean-factor walk rescaled to [0, max_noise], then the blend with uniform pixel noise (rounded, or
+    truncated as the benchmark's code stores it: ``blend_uniform_noise``'s ``quantise``)."""
     n_sequences, seq_len = clean.shape[:2]
     factors = rkn_noise_factors(n_sequences, seq_len, factor_rng)
     levels = (max_noise * (1.0 - factors)).astype(np.float32)
     images = np.empty_like(clean)
     for start in range(0, n_sequences, _NOISE_CHUNK):
         chunk = slice(start, start + _NOISE_CHUNK)
-        images[chunk] = blend_uniform_noise(clean[chunk], levels[chunk], pixel_rng)
+        images[chunk] = blend_uniform_noise(clean[chunk], levels[chunk], pixel_rng, quantise)
     return images, levels
 
 
@@ -126,7 +128,11 @@ def _corrupt(clean: np.ndarray, max_noise: float, factor_rng, pixel_rng) -> tupl
 # meaning in ``drfkit.data.noise.NOISE_KINDS`` and its corruption here, each added with ``.register``
 # (``drfkit.util.registry``); the generator, the fresh noise of training and the caches (``Noise.key``
 # names them) follow.
-FRAME_CORRUPTIONS: Registry = Registry("corruption of pendulum frames", {"rkn_uniform": _corrupt})
+FRAME_CORRUPTIONS: Registry = Registry("corruption of pendulum frames", {
+    "rkn_uniform": _corrupt,
+    "rkn_uniform_truncated": lambda clean, max_noise, factor_rng, pixel_rng: _corrupt(clean, max_noise, factor_rng,
+                                                                                      pixel_rng, "truncate"),
+})
 
 
 def check_frame_noise(noise, where: str) -> Noise:

@@ -33,7 +33,8 @@ def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: 
 @torch.no_grad()
 def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float | None = None,
                   level: float = 0.95, seed: int = 0, min_run_time: float = 0.3, device=None,
-                  thresholds: dict[str, float] | None = None, timing_frames: int = 0) -> pd.DataFrame:
+                  thresholds: dict[str, float] | None = None, timing_frames: int = 0,
+                  other_gates: dict[str, Gate] | None = None) -> pd.DataFrame:
     """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
 
     Metrics: the features run once, then one deterministic and one always-dropout pass (masks
@@ -46,7 +47,10 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     with seed + RANDOM_SEED_OFFSET). ``thresholds`` (name -> threshold)
     adds Kalman-gain rows, each with its random twin 'random:<name>' and its oracle twin
     'oracle:<name>' (``oracle_selection``: as many frames, those of largest true error of the
-    deterministic prediction; metrics only, its times are NaN) (used by ``sweep_gate``).
+    deterministic prediction; metrics only, its times are NaN) (used by ``sweep_gate``). ``other_gates``
+    (name -> a gate fitted elsewhere, e.g. on validation at the training noise) adds its Kalman-gain row
+    'kalman_gain@<name>' (its own direction and threshold) and random twin 'random@<name>', from the same
+    passes and timed in the same run, whole inference included: one pass of the test set serves every gate.
 
     Times, per real frame, all measured in this call on the same inputs (interleaved medians),
     on about ``timing_frames`` real frames of evenly spaced test sequences (``timing_subset``;
@@ -73,7 +77,6 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     y = test.targets.to(device)
     n_real = int(real.sum())
     common = dict(n_samples=n_samples, dropout_p=p)
-    kg = dict(direction=gate.direction)
     rnd = dict(random_seed=seed + RANDOM_SEED_OFFSET)
 
     was = eval_mode(model)
@@ -105,14 +108,18 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
         twin_of: dict[str, str] = {}  # random twin -> its Kalman-gain row
         # the oracle twins of the sweep: as many frames, those of largest true error (metrics only: never timed)
         abs_error = (passes["no_dropout"].mean - y).abs().mean(dim=-1)
-        for name, thr in {"kalman_gain": gate.threshold, **(thresholds or {})}.items():
-            n_sel = int(evaluate(name, "kalman_gain", {**kg, "threshold": thr}).selected.sum())
-            twin = "random" if name == "kalman_gain" else f"random:{name}"
+        gated = {"kalman_gain": (gate.direction, gate.threshold),
+                 **{f"kalman_gain@{k}": (g.direction, g.threshold) for k, g in (other_gates or {}).items()},
+                 **{k: (gate.direction, thr) for k, thr in (thresholds or {}).items()}}
+        for name, (direction, thr) in gated.items():
+            n_sel = int(evaluate(name, "kalman_gain", {"direction": direction, "threshold": thr}).selected.sum())
+            twin = ("random" if name == "kalman_gain" else name.replace("kalman_gain@", "random@")
+                    if name.startswith("kalman_gain@") else f"random:{name}")
             pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
             assert int(pred.selected.sum()) == n_sel
             rows[-1]["threshold"] = thr
             twin_of[twin] = name
-            if name != "kalman_gain":
+            if name in (thresholds or {}):
                 pred = assemble(passes["no_dropout"], passes["always"], oracle_selection(abs_error, real, n_sel))
                 rows.append({"setting": f"oracle:{name}", "threshold": thr, "n_selected": n_sel,
                              **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
@@ -122,17 +129,20 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
         whole_set = idx.numel() == x.shape[0]
         x_t, real_t = (x, real) if whole_set else (x[idx], real[idx])
         h_t, gains_t = (h, gains) if whole_set else model.features(x_t, return_gains=True)
-        scores_t = competency_score(gains_t, gate.direction)
-        timed = {name: (setting, extra if setting != "random" else
-                        {**extra, "n_random": int(apply_gating(scores_t, variants[twin_of[name]][1]["threshold"],
-                                                               real_t).sum())})
+        def n_timed_selected(kg_name: str) -> int:  # the Kalman-gain row's count on the timed subset
+            kg_extra = variants[kg_name][1]
+            return int(apply_gating(competency_score(gains_t, kg_extra["direction"]), kg_extra["threshold"],
+                                    real_t).sum())
+
+        timed = {name: (setting, extra if setting != "random" else {**extra, "n_random": n_timed_selected(twin_of[name])})
                  for name, (setting, extra) in variants.items()}
         stage_fns = {name: (lambda s=setting, e=extra: uncertainty_stage(model, h_t, gains_t, real_t, s,
                                                                          **common, **e))
                      for name, (setting, extra) in timed.items()}
         head_s = measure_interleaved(stage_fns, min_run_time / 2)
         whole_fns = {name: (lambda s=timed[name][0], e=timed[name][1]:
-                            run_setting(model, x_t, real_t, s, **common, **e)) for name in SETTINGS}
+                            run_setting(model, x_t, real_t, s, **common, **e))
+                     for name in (*SETTINGS, *(f"{k}@{g}" for g in (other_gates or {}) for k in ("kalman_gain", "random")))}
         whole_fns["features"] = lambda: model.features(x_t)
         whole_fns["features_gains"] = lambda: model.features(x_t, return_gains=True)
         whole_s = measure_interleaved(whole_fns, min_run_time, min_rounds=7)
@@ -141,7 +151,7 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     n_timed = int(real_t.sum())
     frame = pd.DataFrame(rows)
     frame["fraction"] = frame["n_selected"] / n_real
-    gains_used = frame["setting"].isin(["kalman_gain", *(thresholds or {})])
+    gains_used = frame["setting"].isin(["kalman_gain", *(thresholds or {})]) | frame["setting"].str.startswith("kalman_gain@")
     per_frame = 1e3 / n_timed
     frame["head_ms"] = frame["setting"].map(head_s) * per_frame
     frame["features_ms"] = np.where(gains_used, whole_s["features_gains"], whole_s["features"]) * per_frame

@@ -5,14 +5,15 @@ level (``drfkit.data.noise.blend_uniform_noise``). So, for l > 0,
 
     P(pixel = k | c, l) = |[k - 1/2, k + 1/2) ∩ [(1 - l) c, (1 - l) c + 255 l]| / (255 l)
 
-and P(k | c, 0) = [k = c]. Pixels are independent given the clean frame, and a clean frame is one of the
+and P(k | c, 0) = [k = c]. The benchmark's code truncates the blend instead (``quantise="truncate"``, the noise
+kind ``rkn_uniform_truncated``): then the interval is [k, k + 1). Pixels are independent given the clean frame, and a clean frame is one of the
 bank's images (``drfkit.data.rod_bank``: every image the renderer can draw, each standing for its arc of
 angles). Three estimators use it, none learned:
 
 * ``frame_log_likelihoods`` -- log P(frame | image j) (F, J), with the noise level known (the true one) or
   marginalised over a grid of levels (uniform prior, ``LEVEL_GRID``).
 * ``per_frame_bayes`` -- the posterior mean of (cos theta, sin theta) of one frame, no dynamics.
-* ``pixel_particle_filter`` -- a particle filter with the TRUE physics (``drfkit.methods.oracle``'s
+* ``pixel_particle_filter`` -- a particle filter with the TRUE physics (``drfkit.methods.references``'s
   propagation, velocity noise N(0, 0.1^2) per frame, start uniform at rest) weighting particles by the
   exact likelihood of the image their angle draws: the best that is physically possible on these
   pixels, up to Monte Carlo error (``particle_convergence`` shows it).
@@ -32,13 +33,13 @@ import torch
 
 from drfkit.data import pendulum as pend
 from drfkit.data.rod_bank import rod_bank
-from drfkit.methods.oracle import normalised_weights, pendulum_propagate, resample_degenerate
+from drfkit.methods.references import normalised_weights, pendulum_propagate, resample_degenerate
 
 FLOOR = 1e-4
 # the marginal over an unknown level: l = 0 and 128 levels up to 1, equally likely a priori
 LEVEL_GRID = (0.0, *np.linspace(1.0 / 128, 1.0, 128))
 # Of the grid, each frame sums over the levels its never-inked pixels admit: a never-inked pixel holds at
-# most rint(255 l), so levels below (max - 1/2) / 255 are out (a FLOOR penalty, the same for every image),
+# most rint(255 l) (truncated: floor(255 l)), so levels below (max - offset) / 255 are out (a FLOOR penalty, the same for every image),
 # and the max of the ~85 such pixels lies above LEVEL_SPAN * 255 l but with probability 0.85^85 ~ 1e-6, so
 # levels above that bound / LEVEL_SPAN (+ a grid step) lose a factor (l_kept / l)^576 and are negligible
 # (tests/test_pixel_bayes.py compares with the whole grid).
@@ -59,25 +60,39 @@ def _sparse_bank():
     return torch.from_numpy(pix), torch.from_numpy(val)
 
 
-def pixel_log_prob(k: torch.Tensor, c: torch.Tensor, level: torch.Tensor) -> torch.Tensor:
-    """log P(pixel = k | clean c, level l), broadcast over any shapes (float64 math, module docstring)."""
+# how far below k the blend values that store as k start: rint keeps [k - 1/2, k + 1/2), truncation [k, k + 1)
+QUANTISE_OFFSET = {"round": 0.5, "truncate": 0.0}
+
+
+def _offset(quantise: str) -> float:
+    if quantise not in QUANTISE_OFFSET:
+        raise ValueError(f"quantise must be one of {sorted(QUANTISE_OFFSET)} (how the blend was stored), got {quantise!r}")
+    return QUANTISE_OFFSET[quantise]
+
+
+def pixel_log_prob(k: torch.Tensor, c: torch.Tensor, level: torch.Tensor, quantise: str = "round") -> torch.Tensor:
+    """log P(pixel = k | clean c, level l), broadcast over any shapes (float64 math, module docstring); ``quantise``:
+    how the blend was stored ('round', the book's generator; 'truncate', the benchmark's code)."""
+    offset = _offset(quantise)
     k, c, level = k.double(), c.double(), level.double()
     lo = (1.0 - level) * c
     width = 255.0 * level
-    overlap = (torch.minimum(k + 0.5, lo + width) - torch.maximum(k - 0.5, lo)).clamp(0.0, 1.0)
+    overlap = (torch.minimum(k + 1.0 - offset, lo + width) - torch.maximum(k - offset, lo)).clamp(0.0, 1.0)
     noisy = torch.log(overlap.clamp_min(FLOOR)) - torch.log(width.clamp_min(1e-300))
     exact = torch.where(k == c, 0.0, math.log(FLOOR))
     return torch.where(level > 0, noisy, exact)
 
 
-def frame_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None) -> np.ndarray:
-    """log P(frame | bank image j) (F, J) of frames uint8 (F, 24, 24).
+def frame_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None, quantise: str = "round"
+                          ) -> np.ndarray:
+    """log P(frame | bank image j) (F, J) of frames uint8 (F, 24, 24) (``quantise``: ``pixel_log_prob``'s).
 
     ``levels`` (F,): each frame's true noise level; None: marginalised over ``LEVEL_GRID`` (uniform).
     Per frame, the sum over the 576 pixels is split into the sum as if every pixel were background
     (c = 0, one value per frame) plus, over each image's inked pixels, the change their value makes. The
     bank's J images hold 21,553 inked pixels but only U ~ 10,000 distinct (pixel, value) pairs: each pair's
     change is computed once per frame (f, U) and an incidence matrix (J, U) sums them per image."""
+    offset = _offset(quantise)
     images = np.asarray(images)
     if images.dtype != np.uint8 or images.ndim != 3 or images.shape[1:] != (pend.IMAGE_SIZE, pend.IMAGE_SIZE):
         raise ValueError(f"images must be uint8 (F, 24, 24), got {images.dtype} {images.shape}")
@@ -93,17 +108,17 @@ def frame_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None) 
         for start in range(0, images.shape[0], FRAME_CHUNK):
             x = x_all[start:start + FRAME_CHUNK]
             lv = torch.from_numpy(levels[start:start + FRAME_CHUNK])[:, None]
-            background = pixel_log_prob(x, torch.zeros(()), lv).sum(1)                      # (f,)
+            background = pixel_log_prob(x, torch.zeros(()), lv, quantise).sum(1)            # (f,)
             xu = x[:, upix]                                                                 # (f, U)
-            change = pixel_log_prob(xu, uval, lv) - pixel_log_prob(xu, torch.zeros(()), lv)
+            change = pixel_log_prob(xu, uval, lv, quantise) - pixel_log_prob(xu, torch.zeros(()), lv, quantise)
             out[start:start + x.shape[0]] = (background[:, None] + (inc @ change.T).T).numpy()
         return out
-    tables, changes = (t.view(-1) for t in _level_tables())                                 # G * 65536 each
+    tables, changes = (t.view(-1) for t in _level_tables(quantise))                         # G * 65536 each
     grid = torch.tensor(LEVEL_GRID, dtype=torch.float64)
     blank_pixels = torch.from_numpy(np.flatnonzero(~(rod_bank().images > 0).any(0).reshape(-1)))
     for start in range(0, images.shape[0], LEVEL_CHUNK):
         x = x_all[start:start + LEVEL_CHUNK]                                                # (f, 576)
-        low = (x[:, blank_pixels].amax(1).double() - 0.5).clamp_min(0.0) / 255.0
+        low = (x[:, blank_pixels].amax(1).double() - offset).clamp_min(0.0) / 255.0
         first = torch.searchsorted(grid, low - 1e-12).clamp_max(len(grid) - 1)             # (f,)
         last = torch.searchsorted(grid, (low / LEVEL_SPAN + 1.0 / 128).clamp_max(1.0)).clamp_max(len(grid) - 1)
         # every (frame, level) pair the pruning keeps, and no other: (q,) each
@@ -137,12 +152,12 @@ def _bank_pairs() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     return pairs // 256, pairs % 256, incidence
 
 
-@lru_cache(maxsize=1)
-def _level_tables() -> tuple[torch.Tensor, torch.Tensor]:
+@lru_cache(maxsize=len(QUANTISE_OFFSET))
+def _level_tables(quantise: str = "round") -> tuple[torch.Tensor, torch.Tensor]:
     """log P(k | c, l) for every grid level (G, 65536), entry k * 256 + c, and the change an inked c makes
     to a background pixel's term, log P(k | c, l) - log P(k | 0, l), at the same entries."""
     codes = torch.arange(256)
-    tables = torch.stack([pixel_log_prob(codes[:, None], codes[None, :], torch.tensor(float(g)))
+    tables = torch.stack([pixel_log_prob(codes[:, None], codes[None, :], torch.tensor(float(g)), quantise)
                           for g in LEVEL_GRID])                                              # (G, k, c) float64
     # float32: sums of 576 terms stay within 1e-3 of float64
     return tables.flatten(1).float(), (tables - tables[:, :, :1]).flatten(1).float()
@@ -198,14 +213,15 @@ def pixel_particle_filter(loglik: np.ndarray, *, n_particles: int = 2000, seed: 
     return out
 
 
-def sequence_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None) -> np.ndarray:
+def sequence_log_likelihoods(images: np.ndarray, levels: np.ndarray | None = None, quantise: str = "round"
+                             ) -> np.ndarray:
     """``frame_log_likelihoods`` of sequences uint8 (N, T, 24, 24) -> (N, T, J) (levels (N, T) or None)."""
     images = np.asarray(images)
     n, steps = images.shape[:2]
     flat = frame_log_likelihoods(images.reshape(n * steps, *images.shape[2:]),
-                                 None if levels is None else np.asarray(levels).reshape(-1))
+                                 None if levels is None else np.asarray(levels).reshape(-1), quantise)
     return flat.reshape(n, steps, -1)
 
 
-__all__ = ["FLOOR", "LEVEL_GRID", "frame_log_likelihoods", "per_frame_bayes", "pixel_log_prob",
+__all__ = ["FLOOR", "LEVEL_GRID", "QUANTISE_OFFSET", "frame_log_likelihoods", "per_frame_bayes", "pixel_log_prob",
            "pixel_particle_filter", "sequence_log_likelihoods"]

@@ -162,12 +162,10 @@ PEDESTRIAN_PROTOCOLS: dict[str, dict[str, Any]] = {
 }
 
 
-# The noise-regime map (``drfkit.study.regime``): a protocol's model of each kind, trained at other max noise levels
-# than the paper's 0.5. ``regime_variant`` names them. Its committed rows (one seed, the fit budget, MC-dropout means)
-# are the third round's book protocol's; the fourth round's (the paper's DRF fit well, the calibrated-gain DRF) enter
-# with the map's retrain (a second seed, dropout-off point estimates), so until then the map keeps the models its rows
-# were made with rather than ask a reproduction to train.
-REGIME_BASES = {"drf": "fit_physical_book_wide", "no_dynamics": "fit_no_dynamics_wide", "lstm": "fit_lstm_wide",
+# The noise-regime map (``drfkit.study.regime``): the book protocol's model of each kind (the same variants,
+# ``PROTOCOLS["book"]``), trained at other max noise levels than the paper's 0.5. ``regime_variant`` names them.
+REGIME_BASES = {"drf": "fit_paper_wide", "drf_calibrated": "fit_calibrated_prior_wide",
+                "no_dynamics": "fit_no_dynamics_wide", "lstm": "fit_lstm_wide",
                 "known_dynamics": "fit_known_dynamics_wide"}
 REGIME_TRAIN_NOISE = (0.75, 1.0)
 # the first round's book protocol, whose regime rows (book_train0.75, ...) stay readable

@@ -13,6 +13,7 @@ from drfkit.core.filter import kalman_step
 from drfkit.models.basis import BasisTransition
 from drfkit.models.compiled import filter_loop
 from drfkit.models.parts import VARIANCE_FLOOR, mean_and_log_variance
+from drfkit.models.filtering import run_filter_loop, stack_steps
 from drfkit.models import recursion
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 from drfkit.models.sequence import _EncodedSequenceModel
@@ -160,43 +161,56 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         prior's variances. ``q_scale`` multiplies every q_t (an intervention of the dissection,
         ``drfkit.methods.dissection``; 1 is the model).
         """
-        batch, steps, n = w.shape
-        # unbind once: indexing w[:, t] in the loop would make the backward pass build
-        # and sum T zero-padded (B, T, n) gradients, one per step
-        w_steps, r_steps = w.unbind(1), r.unbind(1)
-        z, p_diag = w_steps[0], r_steps[0]
-        P = torch.diag_embed(p_diag)
-        means, variances = [z], [p_diag]
-        gains = [self.transition.eye.expand(batch, n, n)] if return_gains else None
-        Fs, qs, priors, prior_vars = [], [], [], []
-        state = self.transition.initial_state(batch, w)
-        for t in range(1, steps):
-            F_t, q_t, state = self.transition(z, state)
-            if q_scale != 1.0:
-                q_t = q_t * q_scale
-            if return_transition:
-                Fs.append(F_t), qs.append(q_t)
-            if return_transition or return_prior:
-                priors.append((F_t @ z.unsqueeze(-1)).squeeze(-1))
-            if return_prior:  # diag(F P F^T) without forming the product
-                prior_vars.append(torch.einsum("bij,bjk,bik->bi", F_t, P, F_t) + q_t)
-            z, P, K = kalman_step(z, P, F_t, q_t, w_steps[t], r_steps[t])
-            means.append(z)
-            variances.append(P.diagonal(dim1=-2, dim2=-1))
-            if gains is not None:
-                gains.append(K)
-        out = {"z": torch.stack(means, dim=1), "p_diag": torch.stack(variances, dim=1)}
-        if gains is not None:
-            out["gains"] = torch.stack(gains, dim=1)
+        batch, _, n = w.shape
+        want = {name for name, asked in (("gains", return_gains), ("transition", return_transition),
+                                         ("prior", return_prior)) if asked}
+        first, steps = run_filter_loop(
+            lambda w0, r0: self._filter_start(w0, r0, want),
+            lambda carry, w_t, r_t: self._filter_step(carry, w_t, r_t, q_scale, want), w, r)
         empty = w.new_empty(batch, 0, n)
+        out = {"z": stack_steps(steps, "z", empty, first["z"]), "p_diag": stack_steps(steps, "p_diag", empty, first["p_diag"])}
+        if return_gains:
+            out["gains"] = stack_steps(steps, "gains", w.new_empty(batch, 0, n, n), first["gains"])
         if return_transition:
-            out["F"] = torch.stack(Fs, dim=1) if Fs else w.new_empty(batch, 0, n, n)
-            out["q"] = torch.stack(qs, dim=1) if qs else empty
+            out["F"] = stack_steps(steps, "F", w.new_empty(batch, 0, n, n))
+            out["q"] = stack_steps(steps, "q", empty)
         if return_transition or return_prior:
-            out["z_prior"] = torch.stack(priors, dim=1) if priors else empty
+            out["z_prior"] = stack_steps(steps, "z_prior", empty)
         if return_prior:
-            out["p_prior"] = torch.stack(prior_vars, dim=1) if prior_vars else empty
+            out["p_prior"] = stack_steps(steps, "p_prior", empty)
         return out
+
+    def _filter_start(self, w0: torch.Tensor, r0: torch.Tensor, want: set = frozenset()):
+        """The belief after the first frame (``drfkit.models.filtering``): z_0 = w_0, P_0 = diag(r_0) (B, n, n)
+        (so K_0 = I), the transition's initial memory; record z, p_diag and, if wanted, the gain I."""
+        batch, n = w0.shape
+        carry = (w0, torch.diag_embed(r0), self.transition.initial_state(batch, w0))
+        record = {"z": w0, "p_diag": r0}
+        if "gains" in want:
+            record["gains"] = self.transition.eye.expand(batch, n, n)
+        return carry, record
+
+    def _filter_step(self, carry, w_t: torch.Tensor, r_t: torch.Tensor, q_scale: float = 1.0,
+                     want: set = frozenset()):
+        """One step (``drfkit.models.filtering``): F_t, q_t from the transition on z_{t-1}, then the Kalman
+        predict and update with w_t, r_t (``kalman_step``); records z, p_diag and what ``want`` names
+        ('gains': K; 'transition': F, q, z_prior; 'prior': z_prior, p_prior)."""
+        z, P, state = carry
+        F_t, q_t, state = self.transition(z, state)
+        if q_scale != 1.0:
+            q_t = q_t * q_scale
+        record = {}
+        if "transition" in want:
+            record["F"], record["q"] = F_t, q_t
+        if "transition" in want or "prior" in want:
+            record["z_prior"] = (F_t @ z.unsqueeze(-1)).squeeze(-1)
+        if "prior" in want:  # diag(F P F^T) without forming the product
+            record["p_prior"] = torch.einsum("bij,bjk,bik->bi", F_t, P, F_t) + q_t
+        z, P, K = kalman_step(z, P, F_t, q_t, w_t, r_t)
+        record["z"], record["p_diag"] = z, P.diagonal(dim1=-2, dim2=-1)
+        if "gains" in want:
+            record["gains"] = K
+        return (z, P, state), record
 
     def forward_with_prior(self, inputs: torch.Tensor
                            ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
@@ -269,8 +283,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         ``filter_steps`` starts from."""
         self._check_streaming(frame)
         w, r = self.observe(frame)
-        z, p_diag = w[:, 0], r[:, 0]
-        return z, torch.diag_embed(p_diag), self.transition.initial_state(z.shape[0], z)
+        return self._filter_start(w[:, 0], r[:, 0])[0]
 
     def stream_step(self, frame: torch.Tensor, carry: tuple[torch.Tensor, torch.Tensor, tuple]
                     ) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor, tuple]]:
@@ -279,12 +292,9 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         w_t, r_t. Returns h = [z_t, log diag P_t] (B, 1, 2n) and (z_t (B, n), P_t (B, n, n),
         the transition's state)."""
         self._check_streaming(frame)
-        z, P, state = carry
         w, r = self.observe(frame, starts=False)
-        F_t, q_t, state = self.transition(z, state)
-        z, P, _ = kalman_step(z, P, F_t, q_t, w[:, 0], r[:, 0])
-        h = mean_and_log_variance(z, P.diagonal(dim1=-2, dim2=-1)).unsqueeze(1)
-        return h, (z, P, state)
+        carry, record = self._filter_step(carry, w[:, 0], r[:, 0])
+        return mean_and_log_variance(record["z"], record["p_diag"]).unsqueeze(1), carry
 
 
 # ------------------------------------------------------------------ the calibrated-gain DRF

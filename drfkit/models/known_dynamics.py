@@ -39,6 +39,7 @@ from torch import nn
 from drfkit.core.filter import ekf_update
 from drfkit.data import pendulum_physics as pend
 from drfkit.models.parts import IMAGE_DOWNSAMPLES, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, check_n_samples
+from drfkit.models.filtering import run_filter_loop, stack_steps
 from drfkit.models.sequence import SequenceModel, make_encoder
 from drfkit.models.spec import ModelSpec
 
@@ -206,29 +207,36 @@ class KnownDynamicsFilter(SequenceModel):
         'F' (B, T-1, 2, 2); ``return_prior``: 'x_prior' (B, T-1, 2), 'p_prior' (B, T-1, 2, 2)."""
         if w.ndim != 3 or w.shape[-1] != 2 or r.shape != w.shape:
             raise ValueError(f"w and r must both be (B, T, 2), got {tuple(w.shape)} and {tuple(r.shape)}")
-        w_steps, r_steps = w.unbind(1), r.unbind(1)
-        x, P = self._start(w_steps[0], r_steps[0])
-        xs, Ps, Ks, Fs, priors, prior_ps = [x], [P], [], [], [], []
-        if return_gains:  # at t = 0 the angle is taken from w_0 whole: the gain on the tangent is 1
-            eye = torch.zeros_like(P)
-            eye[:, 0, 0] = -torch.sin(x[:, 0])
-            eye[:, 0, 1] = torch.cos(x[:, 0])
-            Ks.append(eye)
-        for t in range(1, w.shape[1]):
-            x, P, K, F, (prior, p_prior) = self._step(x, P, w_steps[t], r_steps[t], q_scale)
-            xs.append(x), Ps.append(P)
+
+        def start(w0, r0):
+            x, P = self._start(w0, r0)
+            record = {"x": x, "p": P}
+            if return_gains:  # at t = 0 the angle is taken from w_0 whole: the gain on the tangent is 1
+                eye = torch.zeros_like(P)
+                eye[:, 0, 0] = -torch.sin(x[:, 0])
+                eye[:, 0, 1] = torch.cos(x[:, 0])
+                record["gains"] = eye
+            return (x, P), record
+
+        def step(carry, w_t, r_t):
+            x, P, K, F, (prior, p_prior) = self._step(*carry, w_t, r_t, q_scale)
+            record = {"x": x, "p": P}
             if return_gains:
-                Ks.append(K), Fs.append(F)
+                record["gains"], record["F"] = K, F
             if return_prior:
-                priors.append(prior)
-                prior_ps.append(p_prior)
-        out = {"x": torch.stack(xs, 1), "p": torch.stack(Ps, 1)}
+                record["x_prior"], record["p_prior"] = prior, p_prior
+            return (x, P), record
+
+        first, steps = run_filter_loop(start, step, w, r)
+        b = w.shape[0]
+        out = {"x": stack_steps(steps, "x", w.new_empty(b, 0, 2), first["x"]),
+               "p": stack_steps(steps, "p", w.new_empty(b, 0, 2, 2), first["p"])}
         if return_gains:
-            out["gains"] = torch.stack(Ks, 1)
-            out["F"] = torch.stack(Fs, 1) if Fs else w.new_empty(w.shape[0], 0, 2, 2)
+            out["gains"] = stack_steps(steps, "gains", w.new_empty(b, 0, 2, 2), first["gains"])
+            out["F"] = stack_steps(steps, "F", w.new_empty(b, 0, 2, 2))
         if return_prior:
-            out["x_prior"] = torch.stack(priors, 1) if priors else w.new_empty(w.shape[0], 0, 2)
-            out["p_prior"] = torch.stack(prior_ps, 1) if prior_ps else w.new_empty(w.shape[0], 0, 2, 2)
+            out["x_prior"] = stack_steps(steps, "x_prior", w.new_empty(b, 0, 2))
+            out["p_prior"] = stack_steps(steps, "p_prior", w.new_empty(b, 0, 2, 2))
         return out
 
     @staticmethod

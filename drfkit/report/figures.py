@@ -11,11 +11,10 @@ import pandas as pd
 from drfkit.models.kinds import MODEL_CLASSES, model_spec
 from drfkit.study.registry import STUDIES
 
-# How the figures and tables name a series that is no model kind ('physics_bound' is a particle filter on
+# How the figures and tables name a series that is no model kind ('physics_reference' is a particle filter on
 # no_dynamics' outputs: a reference, not a bound on any model). A model kind's label and colour are its
 # spec's (``drfkit.models.spec.ModelSpec``): presentation, not the paper's numbers.
-REFERENCE_LABELS = {"physics_bound": "particle filter on no_dynamics (reference)",
-                    "physics_reference": "particle filter on no_dynamics (reference)"}
+REFERENCE_LABELS = {"physics_reference": "particle filter on no_dynamics (reference)"}
 
 
 def label(model: str) -> str:
@@ -106,13 +105,13 @@ def _legend(ax, fontsize: float = 7, extra: list | None = None, **kw) -> None:
 
 
 def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None = None, ylabel: str = "MAE",
-                  level_name: str = "noise", width: float = 6.0, bound: dict | None = None,
-                  bound_label: str = "particle filter on no_dynamics (reference)",
+                  level_name: str = "noise", width: float = 6.0, reference: dict | None = None,
+                  reference_label: str = "particle filter on no_dynamics (reference)",
                   references: dict[str, dict] | None = None):
     """Grouped bars of seed-mean MAE (95 % interval as error bar) per noise level and model;
-    the paper's value as a black tick on each bar; ``bound`` (level -> MAE: a reference, e.g. the
-    particle filter on no_dynamics' outputs) as a dashed line across each level's group, labelled
-    ``bound_label``; ``references`` (label -> {level -> MAE}: estimators that learn nothing, such as the
+    the paper's value as a black tick on each bar; ``reference`` (level -> MAE: e.g. the particle
+    filter on no_dynamics' outputs) as a dashed line across each level's group, labelled
+    ``reference_label``; ``references`` (label -> {level -> MAE}: estimators that learn nothing, such as the
     limit on pixels) as grey lines of their own style. summary: ``drfkit.study.evaluate.summarise`` by model, noise."""
     fig, axes = new_figure(1, width=width)
     ax = axes[0, 0]
@@ -129,10 +128,10 @@ def plot_mae_bars(summary: pd.DataFrame, models: list[str], paper: dict | None =
             ax.scatter(x, [paper_value(paper, lv, kind) for lv in levels], marker="_", s=300, color="black",
                        zorder=3, label="paper's value" if i == 0 else None)
     for j, lv in enumerate(levels):
-        value = paper_value({float(k): {"bound": v} for k, v in (bound or {}).items()}, lv, "bound")
+        value = paper_value({float(k): {"reference": v} for k, v in (reference or {}).items()}, lv, "reference")
         if np.isfinite(value):
             ax.hlines(value, j - w / 2, j + 0.8 - w / 2, colors="black", linestyles="--", lw=1,
-                      label=bound_label if j == 0 else None)
+                      label=reference_label if j == 0 else None)
     for (text, values), style in zip((references or {}).items(), (":", "-.", (0, (1, 3)), (0, (5, 2, 1, 2)))):
         shown = [(j, values[float(lv)]) for j, lv in enumerate(levels) if np.isfinite(values.get(float(lv), np.nan))]
         for i, (j, value) in enumerate(shown):  # estimators that learn nothing (e.g. the limit on pixels), per level
@@ -184,7 +183,7 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
     fig, axes = new_figure(len(trains) + 1, width=3.6)
     sweep = table[table["test_noise"].notna()]
     for ax, tn in zip(axes[0], trains):
-        for kind in models + ["physics_bound"]:
+        for kind in models + ["physics_reference"]:
             mean = sweep[(sweep["train_noise"] == tn) & (sweep["model"] == kind)].groupby("test_noise")["mae"].mean()
             known = drawn_in_colour(kind)
             ax.plot(mean.index, mean.to_numpy(), marker="o", ms=3, color=color(kind) if known else "black",
@@ -199,7 +198,7 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
             ax.set_ylim(min(lo), max(hi))
     ax, width = axes[0, -1], 0.8 / (len(models) + 1)
     dark = table[table["test"] == "blackout"]
-    for i, kind in enumerate(models + ["physics_bound"]):
+    for i, kind in enumerate(models + ["physics_reference"]):
         mean = dark[dark["model"] == kind].groupby("train_noise")["mae"].mean().reindex(trains)
         known = drawn_in_colour(kind)
         ax.bar(np.arange(len(trains)) + i * width, mean.to_numpy(), width, color=color(kind) if known else "black",
@@ -207,7 +206,7 @@ def plot_regime(table: pd.DataFrame, models: list[str]):
     ax.set_xticks(np.arange(len(trains)) + width * len(models) / 2, [f"{tn:g}" for tn in trains])
     ax.set(title="blackout (15 pure-noise frames)", xlabel="training max noise",
            ylabel="MAE on the blackout (cos θ, sin θ)")
-    shown = dark[dark["model"].isin(models + ["physics_bound"])]
+    shown = dark[dark["model"].isin(models + ["physics_reference"])]
     tallest = shown.groupby(["model", "train_noise"])["mae"].mean().max()
     if np.isfinite(tallest) and tallest > 0:
         ax.set_ylim(0, 1.45 * tallest)  # room for the legend above the bars

@@ -12,7 +12,7 @@ import pandas as pd
 from drfkit.models.kinds import MODEL_CLASSES, model_spec
 from drfkit.report.figures import label, paper_value
 from drfkit.util.io import atomic_savefig, atomic_write_csv
-from drfkit.util.paths import figures_dir, tables_dir
+from drfkit.util.paths import figures_dir, named_result, tables_dir
 from drfkit.methods.protocols import summarise_ablation
 
 
@@ -56,8 +56,8 @@ HEADLINE_FIGURES = [
                           "(a particle filter on no_dynamics' outputs)"),
     ("pendulum_blackout_protocols", "Pendulum blackout under the paper's and the book's protocol, with the "
                                     "true-physics reference"),
-    ("pendulum_mae_with_bound", "Pendulum MAE (paper's protocol) beside the true-physics reference and the paper's "
-                                "values (black ticks)"),
+    ("pendulum_mae_with_reference", "Pendulum MAE (paper's protocol) beside the true-physics reference and the "
+                                    "paper's values (black ticks)"),
     ("pendulum_regime_map", "Noise-regime map: MAE along the test noise for each training noise, and on the blackout"),
 ]
 
@@ -95,17 +95,17 @@ def dynamics_lines(tables: Path) -> list[str]:
     """README lines of the dynamics study (notebook 02): both protocols beside the true-physics
     reference, and the protocol ablation on validation data; [] when notebook 02 has not written them."""
     lines: list[str] = []
-    protocols, bound = tables / "pendulum_protocols.csv", tables / "pendulum_physics_bound.csv"
-    if protocols.exists() and bound.exists():
+    protocols, reference = tables / "pendulum_protocols.csv", named_result(tables, "pendulum_physics_reference")
+    if protocols.exists() and reference.exists():
         pt = pd.read_csv(protocols)
         mae_cols = [c for c in pt if c.startswith("mae_") and c != "mae_after_blackout"]
         mean = pt.groupby(["protocol", "model"], sort=False).mean(numeric_only=True)
-        b = pd.read_csv(bound).groupby("noise")["mae"].mean()
+        b = pd.read_csv(reference).groupby("noise")["mae"].mean()
         lines += ["Does the filter filter? Test MAE (dropout-off, seed means) of each protocol's models beside "
                   "the true-physics reference (a particle filter with the generator's equations on no_dynamics' "
                   "per-frame estimates: knowledge no learned model has; a comparison, not a bound, since a DRF "
                   "can do better than it), and the DRF's mechanism checks "
-                  "(`tables/pendulum_protocols.csv`, `tables/pendulum_physics_bound.csv`, notebook 02):", "",
+                  f"(`tables/pendulum_protocols.csv`, `tables/{reference.name}`, notebook 02):", "",
                   "| protocol | model | " + " | ".join(c.replace("mae_", "MAE ") for c in mae_cols)
                   + " | rank corr(r, noise) | gain pure / clean | ‖Fz − w‖ / ‖z − w‖ |",
                   "|---|---|" + "---|" * (len(mae_cols) + 3)]
@@ -116,13 +116,13 @@ def dynamics_lines(tables: Path) -> list[str]:
                          + " |")
         # each protocol's reference on its own no_dynamics when notebook 02 wrote them (like for like), else the
         # paper protocol's; the noise column holds levels and 'blackout': named as the protocol table's columns
-        per_protocol = tables / "pendulum_physics_bound_protocols.csv"
-        bounds = ({name: g.groupby("noise")["mae"].mean() for name, g in
-                   pd.read_csv(per_protocol).groupby("protocol", sort=False)} if per_protocol.exists() else {"—": b})
-        for name, bp in bounds.items():
-            bound_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in bp.items()}
+        per_protocol = named_result(tables, "pendulum_physics_reference_protocols")
+        references = ({name: g.groupby("noise")["mae"].mean() for name, g in
+                       pd.read_csv(per_protocol).groupby("protocol", sort=False)} if per_protocol.exists() else {"—": b})
+        for name, rp in references.items():
+            reference_of = {("mae_blackout" if k == "blackout" else f"mae_{float(k):g}"): v for k, v in rp.items()}
             lines.append(f"| {name} | true-physics reference on its no_dynamics | "
-                         + " | ".join(fmt(bound_of.get(c)) for c in mae_cols) + " | | | |")
+                         + " | ".join(fmt(reference_of.get(c)) for c in mae_cols) + " | | | |")
         lines.append("")
     ablation = tables / "pendulum_ablation.csv"
     if ablation.exists():
@@ -155,13 +155,14 @@ def dynamics_lines(tables: Path) -> list[str]:
                   "|---|---|" + "---|" * (len(kinds) + 3)]
         for _, r in rg.iterrows():
             lines.append(f"| {r['train_noise']:g} | {r['test']} | " + " | ".join(f"{r[k]:.4f}" for k in kinds)
-                         + f" | {r['physics_bound']:.4f} | {r['drf_over_no_dynamics']:.2f} | {r['drf_over_bound']:.2f} |")
+                         + f" | {r['physics_reference']:.4f} | {r['drf_over_no_dynamics']:.2f} "
+                           f"| {r['drf_over_reference']:.2f} |")
         lines.append("")
     return lines
 
 
 # the README shows these, in this order; report.md all of HEADLINE_FIGURES
-README_FIGURES = ("pendulum_mae_with_bound", "pendulum_blackout_protocols", "pedestrians_mae")
+README_FIGURES = ("pendulum_mae_with_reference", "pendulum_blackout_protocols", "pedestrians_mae")
 
 
 def claims_summary_table(claims_csv: Path) -> list[str]:
@@ -197,8 +198,9 @@ def figure_lines(profile: str, names, command: str, prefix: str) -> list[str]:
     captions = dict(HEADLINE_FIGURES)
     lines = []
     for name in names:
-        if (results_dir(profile) / "figures" / f"{name}.png").exists():
-            lines += [f"![{captions[name]}]({prefix}figures/{name}.png)", f"*{captions[name]}* (`{command}`)", ""]
+        path = named_result(results_dir(profile) / "figures", name, ".png")
+        if path.exists():
+            lines += [f"![{captions[name]}]({prefix}figures/{path.name})", f"*{captions[name]}* (`{command}`)", ""]
     return lines
 
 

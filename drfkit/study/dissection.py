@@ -151,21 +151,16 @@ def restart_check(P, kind: str, protocol: str = "book") -> pd.DataFrame:
     never the OOD level or a blackout). Columns: slot, training_seed, checkpoint, r_level_spearman, r_log_slope,
     gain_slope, mae, failed (rho < FAILED_SEED_SPEARMAN), used (the run the book's tables read). A run whose
     checkpoint is absent has NaN statistics (a replaced seed's run need not be kept)."""
-    import dataclasses
-
     from drfkit.methods.train import load_checkpoint
     from drfkit.study.pendulum_runs import pendulum_split, training_seed
 
-    section = getattr(P.pendulum, protocol)
-    unreplaced = dataclasses.replace(P, pendulum=dataclasses.replace(
-        P.pendulum, **{protocol: dataclasses.replace(section, restarts={})}))
     level = P.pendulum.train_max_noise
     val = pendulum_split(P, "val", level)
     rows = []
     for slot in P.seeds:
         used = training_seed(P, kind, slot, protocol)
-        for seed, profile in {slot: unreplaced, used: P}.items():
-            stem = studies.checkpoint_stem(profile, "pendulum", kind, slot, protocol)
+        for seed in dict.fromkeys([slot, used]):
+            stem = studies.checkpoint_stem(P, "pendulum", kind, slot, protocol, training_seed=seed)
             row = {"slot": slot, "training_seed": seed, "checkpoint": stem.name, "used": seed == used}
             best = stem.parent / f"{stem.name}-best.pt"
             if best.exists():

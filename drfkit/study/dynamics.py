@@ -5,8 +5,8 @@ does every model compare with filters that know the true physics?
                           noise level and on the blackout test set
 * ``blackout_curves``  -- MAE per frame through the blackout (the dropout-off estimate, as every
                           MAE the book reports)
-* ``physics_bound``    -- (a reference, despite its name) the particle filter with the true physics fed no_dynamics' per-frame
-                          estimates (``drfkit.methods.oracle``), its likelihood scale and outlier weight
+* ``physics_reference`` -- the particle filter with the true physics fed no_dynamics' per-frame
+                          estimates (``drfkit.methods.references``), its likelihood scale and outlier weight
                           chosen on the VALIDATION split at the training noise; and the per-frame
                           template-matching reference ("what the pixels hold")
 
@@ -23,8 +23,8 @@ import numpy as np
 import pandas as pd
 import torch
 
-from drfkit.methods import oracle
-from drfkit.methods.oracle import bound_on, like_for_like_mae
+from drfkit.methods import references
+from drfkit.methods.references import like_for_like_mae, reference_on
 from drfkit.study import studies
 from drfkit.core.metrics import bootstrap_interval
 from drfkit.data.noise import Noise
@@ -88,20 +88,21 @@ def blackout_table(curves: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def physics_bound(P, no_dynamics: dict[int, Any], levels, n_particles: int = 1000
-                  ) -> tuple[pd.DataFrame, pd.DataFrame]:
+def physics_reference(P, no_dynamics: dict[int, Any], levels, n_particles: int = 1000
+                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The true-physics particle filter on each no_dynamics seed's per-frame estimates.
 
     Returns (table, curves): table rows per (seed, noise) with 'mae_input' (no_dynamics), 'mae'
     (the reference), the calibrated 'sigma_scale' and 'outlier'; noise = 'blackout' for the blackout
-    test set. curves: the reference's MAE per frame on the blackout set (model = 'physics_bound').
+    test set. curves: the reference's MAE per frame on the blackout set (model = 'physics_reference').
     """
     val = studies.pendulum_split(P, "val")
     sets = {float(level): studies.pendulum_split(P, "test", level) for level in levels}
     sets["blackout"] = blackout_split(P, "test")
     rows, curve_rows = [], []
     for seed, model in steps(no_dynamics.items(), "true-physics reference (per no_dynamics seed)", len(no_dynamics)):
-        table, curves = bound_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles, seed)
+        table, curves = reference_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles,
+                                     seed)
         rows.append(table.assign(seed=seed))
         curve_rows.append(curves.assign(seed=seed))
     order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "calibration_interior", "n_particles"]
@@ -127,7 +128,8 @@ def encoder_accuracy_check(targets: np.ndarray, encoder_mae: dict[str, float], n
         sigma = float(mae) * math.sqrt(math.pi / 2.0)
         rng = np.random.default_rng([seed, i])
         est = targets + rng.normal(0.0, sigma, size=targets.shape)
-        filtered = oracle.pendulum_particle_filter(est, np.full_like(est, sigma), n_particles=n_particles, seed=seed)
+        filtered = references.pendulum_particle_filter(est, np.full_like(est, sigma), n_particles=n_particles,
+                                                       seed=seed)
         rows.append({"name": name, "encoder_mae": float(mae), "encoder_mae_drawn": float(np.abs(est - targets).mean()),
                      "sigma": sigma, "filtered_mae": float(np.abs(filtered - targets).mean()),
                      "n_particles": n_particles})
@@ -140,7 +142,7 @@ def pixel_reference(P, levels, n_angles: int = 4096) -> pd.DataFrame:
     rows = []
     for level in levels:
         arrays = studies.pendulum_split(P, "test", level)
-        theta = oracle.template_angles(arrays["images"], n_angles)
+        theta = references.template_angles(arrays["images"], n_angles)
         est = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
         rows.append({"noise": float(level), "mae": float(np.abs(est - arrays["targets"]).mean()), "n_angles": n_angles})
     return pd.DataFrame(rows)
@@ -199,7 +201,7 @@ def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 20
         images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
         loglik = pixel_bayes.sequence_log_likelihoods(images)
         known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
-        theta = oracle.template_angles(images)
+        theta = references.template_angles(images)
         by_count = {count: pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
                     for count in particle_counts}
         estimates = {
@@ -219,6 +221,50 @@ def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 20
             conv.append({"noise": name, "n_particles": count,
                          "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
     return pd.DataFrame(rows), pd.DataFrame(conv)
+
+
+def quantisation_effect(P, models: dict[tuple[str, int], Any], levels, n_sequences: int = 100,
+                        n_particles: int = 2000, seed: int = 0) -> pd.DataFrame:
+    """What storing the blend by truncation (the benchmark's code) instead of rounding (the book's generator) changes,
+    on the first ``n_sequences`` test sequences at each max noise of ``levels``: the same motions, noise levels and
+    pixel draws, stored both ways (noise kinds 'rkn_uniform' and 'rkn_uniform_truncated').
+
+    Rows per (noise, estimator, frames, likelihood) with 'mae': the limit's per-frame Bayes estimate and particle
+    filter ('per_frame_bayes', 'pixel_pf') with the likelihood of either storage on either frames (the mismatched
+    pair shows what the wrong model of the benchmark's pixels costs); every (kind, seed) of ``models`` by its
+    dropout-off pass on both ('likelihood' NaN; trained on rounded frames, so 'truncate' is a shift it never saw)."""
+    from drfkit.methods import pixel_bayes
+
+    rows = []
+    for level in steps([float(v) for v in levels], "rounding or truncation", len(levels)):
+        frames = {q: studies.pendulum_split(P, "test", Noise(kind, level))
+                  for q, kind in (("round", "rkn_uniform"), ("truncate", "rkn_uniform_truncated"))}
+        targets = frames["round"]["targets"][:n_sequences]
+        for stored, arrays in frames.items():
+            images = arrays["images"][:n_sequences]
+            for likelihood in ("round", "truncate"):
+                loglik = pixel_bayes.sequence_log_likelihoods(images, quantise=likelihood)
+                estimates = {"per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
+                             "pixel_pf": pixel_bayes.pixel_particle_filter(loglik, n_particles=n_particles, seed=seed)}
+                rows += [{"noise": level, "estimator": name, "seed": np.nan, "frames": stored, "likelihood": likelihood,
+                          "mae": float(abs_error_per_frame(est, targets).mean())} for name, est in estimates.items()]
+            for (kind, model_seed), model in models.items():
+                point = _dropout_off_point(model, images)
+                rows.append({"noise": level, "estimator": kind, "seed": model_seed, "frames": stored,
+                             "likelihood": np.nan, "mae": float(abs_error_per_frame(point, targets).mean())})
+    return pd.DataFrame(rows)
+
+
+def _dropout_off_point(model, images: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """The dropout-off output (N, T, out) of ``model`` on images uint8 (N, T, 24, 24); its mode restored after."""
+    was = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            x = torch.from_numpy(images)
+            return torch.cat([model(x[i:i + chunk])[0] for i in range(0, x.shape[0], chunk)]).numpy()
+    finally:
+        model.train(was)
 
 
 # ------------------------------------------------------------------------------ pedestrians
@@ -261,8 +307,8 @@ def _masked_mae(est: np.ndarray, target: np.ndarray, where: np.ndarray) -> float
     return float(np.abs(est - target)[where].mean())
 
 
-def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int], Any] | None = None
-                     ) -> pd.DataFrame:
+def pedestrian_reference(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int], Any] | None = None
+                         ) -> pd.DataFrame:
     """A constant-velocity Kalman filter on each no_dynamics seed's per-frame depths, its sigma scale
     and acceleration noise chosen on the VALIDATION split at the training p; evaluated at every
     ``ped_eval_p`` and on the pedestrian blackout (where it predicts through the removed frames).
@@ -276,7 +322,8 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
         best = (np.inf, None, None)
         for scale in CV_SIGMA_SCALES:
             for accel in CV_ACCEL_STDS:
-                est = oracle.constant_velocity_filter(mean, scale * sigma, val["mask"], dt=_seconds(val), accel_std=accel)
+                est = references.constant_velocity_filter(mean, scale * sigma, val["mask"], dt=_seconds(val),
+                                                          accel_std=accel)
                 err = _masked_mae(est, target, val["mask"])
                 if err < best[0]:
                     best = (err, scale, accel)
@@ -284,14 +331,15 @@ def pedestrian_bound(P, no_dynamics: dict[int, Any], models: dict[tuple[str, int
         for p in P.pedestrians.eval_p:
             seqs = studies.pedestrian_split(P, "test", p)
             mean, sigma = _depth_predictions(P, model, seqs["inputs"], seed)
-            est = oracle.constant_velocity_filter(mean, scale * sigma, seqs["mask"], dt=_seconds(seqs), accel_std=accel)
-            rows.append({"model": "cv_bound", "seed": seed, "noise": str(float(p)),
+            est = references.constant_velocity_filter(mean, scale * sigma, seqs["mask"], dt=_seconds(seqs),
+                                                      accel_std=accel)
+            rows.append({"model": "cv_reference", "seed": seed, "noise": str(float(p)),
                          "mae": _masked_mae(est, seqs["targets"][..., 0], seqs["mask"]),
                          "sigma_scale": scale, "accel_std": accel})
         dark, removed = pedestrian_blackout(P, "test")
         mean, sigma = _depth_predictions(P, model, dark["inputs"], seed)
-        est = oracle.constant_velocity_filter(mean, scale * sigma, ~removed, dt=_seconds(dark), accel_std=accel)
-        rows.append({"model": "cv_bound", "seed": seed, "noise": "blackout",
+        est = references.constant_velocity_filter(mean, scale * sigma, ~removed, dt=_seconds(dark), accel_std=accel)
+        rows.append({"model": "cv_reference", "seed": seed, "noise": "blackout",
                      "mae": _masked_mae(est, dark["targets"][..., 0], removed), "sigma_scale": scale, "accel_std": accel})
     if models:
         dark, removed = pedestrian_blackout(P, "test")

@@ -22,6 +22,9 @@ from drfkit.util.progress import steps
 from drfkit.methods.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
+# sequences per prediction chunk of every test-set evaluation: one batch size, so a later call on the same inputs
+# (calibration, the curves) finds the evaluation's cached prediction (drfkit.methods.predictions keys it)
+EVAL_BATCH_SIZE = 256
 # The values each metric can take (PICP is a fraction): interval ends are clipped to them.
 METRIC_RANGES = {"mae": (0.0, math.inf), "picp": (0.0, 1.0), "mpiw": (0.0, math.inf), "crps": (0.0, math.inf),
                  "cal_error": (0.0, 1.0)}
@@ -35,7 +38,7 @@ def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: floa
 
 
 def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_rates, level: float = 0.95,
-                         batch_size: int = 256, device=None, seed: int | None = None, cache=None
+                         batch_size: int = EVAL_BATCH_SIZE, device=None, seed: int | None = None, cache=None
                          ) -> list[dict[str, float]]:
     """``evaluate_model`` at several dropout rates; the encoder and filter run once. With a
     ``seed`` the dropout masks are seeded here and the prediction may come from ``cache``
@@ -103,13 +106,14 @@ def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = ME
 
 
 def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: Iterable[float | None] = (None,),
-                   models: dict | None = None) -> pd.DataFrame:
+                   models: dict | None = None, sequences: dict[float, int] | None = None) -> pd.DataFrame:
     """Every trained (model, seed) of ``study`` at every test noise level and dropout rate.
 
     Returns one row per (model, seed, noise, dropout_p) with all ``METRICS`` (PICP as a
-    fraction). ``dropout_p = None`` means each model's own training rate. A level named twice is
-    refused (its rows would count every seed twice). Test sets are built
-    by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
+    fraction) and 'sequences', the test sequences evaluated. ``dropout_p = None`` means each model's own training
+    rate. ``sequences`` (level -> N): evaluate that level on the first N test sequences only (a sweep's levels that no
+    claim reads); every other level on all. A level named twice is refused (its rows would count every seed
+    twice). Test sets are built by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
     """
     from drfkit.study import studies
 
@@ -121,15 +125,25 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
     device = studies.pick_device(P.device)
     rows = []
     for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
-        data = studies.study_data(P, study, "test", noise)
+        data = first_sequences(studies.study_data(P, study, "test", noise), (sequences or {}).get(noise))
         for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
             results = evaluate_model_rates(model, data, n_samples=P.uncertainty.n_samples, dropout_rates=list(dropout_rates),
                                            level=P.uncertainty.interval_level, device=device, seed=seed,
                                            cache=predictions_dir(P.profile))
             for p, m in zip(dropout_rates, results):
                 rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
-                             "dropout_p": model.default_dropout_p if p is None else float(p), **m})
+                             "dropout_p": model.default_dropout_p if p is None else float(p), **m,
+                             "sequences": len(data)})
     return pd.DataFrame(rows)
+
+
+def first_sequences(data: SequenceData, n: int | None) -> SequenceData:
+    """The first ``n`` sequences of ``data`` (all of them when ``n`` is None or not smaller)."""
+    if n is None or n >= len(data):
+        return data
+    if n < 1:
+        raise ValueError(f"first_sequences: n = {n}; evaluate at least one sequence")
+    return SequenceData(data.inputs[:n], data.targets[:n], None if data.mask is None else data.mask[:n])
 
 
 def calibration_points(P, study: str, noise_levels: Iterable[float], models: dict | None = None) -> pd.DataFrame:
@@ -149,8 +163,9 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
         if data.mask is not None:
             mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
         for (kind, seed), model in models.items():
+            # evaluate_model_rates' batch size: the same cache entry as the evaluation's pass at this level
             pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
-                                        dropout_rates=[None], seed=seed, device=device)[0]
+                                        dropout_rates=[None], seed=seed, batch_size=EVAL_BATCH_SIZE, device=device)[0]
             expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
             rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,
                       "observed": o} for e, o in zip(expected, observed)]

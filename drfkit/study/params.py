@@ -36,8 +36,8 @@ _PEND_DATA = ["pend_train_sequences", "pend_val_sequences", "pend_test_sequences
 _PEND_TRAIN = ["pend_models", "pend_epochs", "pend_batch_size", "pend_lr", "pend_patience", "pend_protocols",
                "pend_book_models", "pend_book_epochs", "pend_book_batch_size", "pend_book_lr", "pend_book_patience",
                "pend_book_restarts"]
-_DYNAMICS = ["bound_particles", "ablation_budget", "ablation_variants", "ablation_seeds", "ablation_round2_budget",
-             "ablation_round2_variants", "ablation_round2_seeds", "regime_train_noise",
+_DYNAMICS = ["reference_particles", "ablation_budget", "ablation_variants", "ablation_seeds",
+             "ablation_round2_budget", "ablation_round2_variants", "ablation_round2_seeds", "regime_train_noise",
              "regime_seeds", "regime_test_sequences", "ablation_round3_budget", "ablation_round3_variants",
              "ablation_round3_seeds",
              "limit_sequences", "limit_particles"]
@@ -57,7 +57,7 @@ NOTEBOOKS: dict[str, list[str]] = {
     "02_pendulum_dynamics": _COMMON + _PEND_DATA + _PEND_TRAIN + _UNC + _DYNAMICS,
     "03_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
     "04_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC
-                               + ["limit_sequences", "limit_particles"],
+                               + ["limit_sequences", "limit_particles", "pend_sweep_sequences"],
     "05_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
     "06_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }

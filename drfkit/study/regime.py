@@ -7,7 +7,7 @@ data seeds, schedule and validation judgement as the ablation), then evaluated o
 of its own (seed ``DATA_SEED + 2``, never read by training or selection) along the whole sweep
 of max noise and on a blackout set (the test split at max noise 0.5 with ``blackout_frames``
 pure noise). MAE is the dropout-off estimate's, as everywhere in the book. Beside every trained
-noise, the true-physics particle filter (``drfkit.methods.oracle.bound_on``) on that noise's
+noise, the true-physics particle filter (``drfkit.methods.references.reference_on``) on that noise's
 no_dynamics estimates, calibrated on the validation split at its training noise.
 
 One JSON row file per (variant, seed) and per reference, under ``<out>/<budget>/regime/``, keyed
@@ -30,7 +30,7 @@ from drfkit.data.noise import Noise
 from drfkit.data.pendulum import blackout_frames, load_pendulum, with_blackout
 from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET
-from drfkit.methods.oracle import bound_on
+from drfkit.methods.references import reference_on
 from drfkit.util.io import atomic_write_json, param_hash
 from drfkit.methods.predictions import cached_predict_rates
 from drfkit.util.progress import steps
@@ -52,8 +52,9 @@ def _test_sets(out, budget: dict, levels: Iterable[float], n_test: int) -> dict[
 
 
 def _settings(levels, n_test: int, n_samples: int, extra: dict | None = None) -> dict[str, Any]:
+    # "point": the rows score the dropout-off pass (rows made from the MC mean carry no such field, so they are stale)
     return {"levels": [float(v) for v in levels], "n_test": int(n_test), "n_samples": int(n_samples),
-            "blackout_noise": BLACKOUT_NOISE, "test_seed": TEST_SEED, **(extra or {})}
+            "blackout_noise": BLACKOUT_NOISE, "test_seed": TEST_SEED, "point": "dropout_off", **(extra or {})}
 
 
 def _cached(path: Path, key: str) -> dict | None:
@@ -100,23 +101,23 @@ def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, l
     return row
 
 
-def bound_row(train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
-              n_particles: int, cache: Path | None = None, progress: bool = False) -> dict[str, Any]:
+def reference_row(train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
+                  n_particles: int, cache: Path | None = None, progress: bool = False) -> dict[str, Any]:
     """The true-physics reference (a particle filter) on the no_dynamics of ``train_noise`` (σ scale and outlier weight
     chosen on the validation split at that noise), at every test level and on the blackout."""
     name = regime_variant("no_dynamics", train_noise)
     budget, _, folder, run_key = ablation._run(name, seed, budget_name, out)
     key = param_hash({"run": run_key, "n_particles": int(n_particles), **_settings(levels, n_test, n_samples)}, 8)
-    path = folder / "regime" / f"physics_bound-train{train_noise:g}-seed{seed}.json"
+    path = folder / "regime" / f"physics_reference-train{train_noise:g}-seed{seed}.json"
     if (row := _cached(path, key)) is not None:
         return row
     model = _model(name, seed, budget_name, out, progress)
     val = ablation._split(ablation.data_dir(out), budget, "val", train_noise)
-    table, curves = bound_on(lambda arrays: _point_and_sigma(model, arrays, n_samples, seed, cache), val,
-                             _test_sets(out, budget, levels, n_test), n_particles, seed)
+    table, curves = reference_on(lambda arrays: _point_and_sigma(model, arrays, n_samples, seed, cache), val,
+                                 _test_sets(out, budget, levels, n_test), n_particles, seed)
     sweep = table[table["noise"] != "blackout"]
     per_frame = curves.sort_values("frame")["mae"].to_numpy()
-    row = {"model": "physics_bound", "variant": name, "train_noise": float(train_noise), "seed": seed,
+    row = {"model": "physics_reference", "variant": name, "train_noise": float(train_noise), "seed": seed,
            "budget": budget_name, "key": key, "n_particles": int(n_particles),
            "sigma_scale": float(table["sigma_scale"].iloc[0]), "outlier": float(table["outlier"].iloc[0]),
            "mae": {f"{float(n):g}": float(m) for n, m in zip(sweep["noise"], sweep["mae"])},
@@ -130,14 +131,14 @@ def regime_map(train_noises: Iterable[float], seeds: Iterable[int], budget_name:
                n_samples: int, n_particles: int, cache: Path | None = None, progress: bool = False) -> pd.DataFrame:
     """Long table: one row per (train_noise, model, seed, test) with ``mae``; ``test`` is a max
     noise level (as a string) or 'blackout' / 'after_blackout'; ``test_noise`` is its number
-    (NaN for the blackout rows). Models: every kind of ``REGIME_BASES`` and 'physics_bound'."""
+    (NaN for the blackout rows). Models: every kind of ``REGIME_BASES`` and 'physics_reference'."""
     rows = []
     todo = [(tn, seed) for tn in train_noises for seed in seeds]
     for train_noise, seed in steps(todo, "noise-regime map (training noise, seed)"):
         found = [model_row(kind, train_noise, seed, budget_name, out, levels, n_test, n_samples, cache, progress)
                  for kind in REGIME_BASES]
-        found.append(bound_row(train_noise, seed, budget_name, out, levels, n_test, n_samples, n_particles, cache,
-                               progress))
+        found.append(reference_row(train_noise, seed, budget_name, out, levels, n_test, n_samples, n_particles,
+                                   cache, progress))
         for row in found:
             base = {"train_noise": float(train_noise), "model": row["model"], "seed": seed}
             rows += [base | {"test": lv, "test_noise": float(lv), "mae": m} for lv, m in row["mae"].items()]
@@ -149,20 +150,21 @@ def regime_map(train_noises: Iterable[float], seeds: Iterable[int], budget_name:
 def regime_summary(table: pd.DataFrame) -> pd.DataFrame:
     """Seed-mean MAE per (train_noise, test) with a column per model, and two ratios: the DRF
     over no_dynamics (< 1: the filter helps) and over the particle-filter reference (< 1: the DRF does
-    better than filtering no_dynamics' outputs with the true physics; the column keeps the name 'bound')."""
+    better than filtering no_dynamics' outputs with the true physics)."""
     wide = table.pivot_table(index=["train_noise", "test"], columns="model", values="mae", aggfunc="mean",
                              sort=False)
     wide["drf_over_no_dynamics"] = wide["drf"] / wide["no_dynamics"]
-    wide["drf_over_bound"] = wide["drf"] / wide["physics_bound"]
+    wide["drf_over_reference"] = wide["drf"] / wide["physics_reference"]
     return wide.reset_index().rename_axis(columns=None)
 
 
 def profile_map(P, progress: bool = False) -> pd.DataFrame:
     """``regime_map`` with a profile's settings (``regime_*``, the budget of the ablation round that chose
     the book's protocol, ``ablation_round2_budget``, the sweep,
-    ``n_samples``, ``bound_particles``); rows under ``results/<profile>/ablation``."""
+    ``n_samples``, ``reference_particles``); rows under ``results/<profile>/ablation``."""
     from drfkit.util.paths import predictions_dir, results_dir
 
-    return regime_map(P.dynamics.regime.train_noise, P.dynamics.regime.seeds, P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"),
-                      P.pendulum.sweep_max_noise, P.dynamics.regime.test_sequences, P.uncertainty.n_samples, P.dynamics.bound_particles,
+    return regime_map(P.dynamics.regime.train_noise, P.dynamics.regime.seeds, P.dynamics.ablation.round2.budget,
+                      results_dir(P.profile, "ablation"), P.pendulum.sweep_max_noise, P.dynamics.regime.test_sequences,
+                      P.uncertainty.n_samples, P.dynamics.reference_particles,
                       cache=predictions_dir(P.profile), progress=progress)

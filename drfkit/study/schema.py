@@ -107,6 +107,9 @@ SCHEMA = Section("", {
         "train_max_noise": Spec(float, "a number in [0, 1]", _in01),
         "eval_max_noise": Spec(list[float], _LEVELS, _levels),
         "sweep_max_noise": Spec(list[float], _LEVELS, _levels),
+        "sweep_sequences": Spec(int, *_POSITIVE,
+                                "test sequences (the first N) at the sweep's levels other than eval_max_noise: no claim "
+                                "reads them, so they are shown with their seed intervals on fewer sequences"),
         "data_seed": Spec(int, "an integer >= 0", lambda v: v >= 0),
         "test_seed": Spec(int, "an integer >= 0, neither data_seed nor data_seed + 1", lambda v: v >= 0,
                           "the test split's own seed: a fresh one makes a test set no selection step has read"),
@@ -136,8 +139,8 @@ SCHEMA = Section("", {
         }, "the book's training protocol (drfkit.methods.protocols)"),
     }, "the noisy pendulum: data, then training under the paper's protocol"),
     "dynamics": Section("", {
-        "bound_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
-                                "particles of the true-physics reference (drfkit.methods.oracle)"),
+        "reference_particles": Spec(int, "an integer >= 10", lambda v: v >= 10,
+                                    "particles of the true-physics reference (drfkit.methods.references)"),
         "ablation": Section("ablation_", {
             "budget": Spec(str, f"one of {list(ABLATION_BUDGETS)}", lambda v: v in ABLATION_BUDGETS),
             "variants": Spec(list[str], f"a non-empty subset of {list(VARIANTS)}", _subset(VARIANTS)),

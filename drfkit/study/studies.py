@@ -12,6 +12,8 @@ initialisation, batch order and dropout masks.
 """
 from __future__ import annotations
 
+import dataclasses
+
 from typing import Any
 
 import pandas as pd
@@ -78,9 +80,14 @@ def fresh_training(P, study: str, protocol: str):
 
 
 def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper",
-                    options: dict[str, Any] | None = None):
+                    options: dict[str, Any] | None = None, training_seed: int | None = None):
+    """The checkpoint files' stem of the run in ``seed``'s slot (``training_seed``: of the run that slot would hold
+    if it trained from that seed, e.g. the run a restart replaced)."""
     cfg = model_config(study, kind, P, protocol, options)
-    key = param_hash({"model": cfg, "train": naming_fields(train_config(P, study, kind, seed, protocol)),
+    train = train_config(P, study, kind, seed, protocol)
+    if training_seed is not None:
+        train = dataclasses.replace(train, seed=int(training_seed))
+    key = param_hash({"model": cfg, "train": naming_fields(train),
                       "data": study_data_key(P, study, protocol)}, 8)
     return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
 

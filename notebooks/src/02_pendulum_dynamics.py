@@ -78,7 +78,7 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # %% [markdown]
 # ## A reference: a filter that knows the physics
 # **These references use knowledge no learned model has.** The *true-physics reference* is a causal
-# particle filter with the generator's own equations (`drfkit.methods.oracle`: θ'' = −c sin θ − 0.1 θ',
+# particle filter with the generator's own equations (`drfkit.methods.references`: θ'' = −c sin θ − 0.1 θ',
 # velocity noise N(0, 0.1²) per frame, start at rest), fed each no_dynamics seed's per-frame
 # estimates of (cos θ, sin θ) and their σ; the σ scale and an outlier weight are chosen on the
 # validation split at the training noise only. It is what this filter makes of that encoder's outputs
@@ -92,20 +92,20 @@ mechanism.groupby("model").mean(numeric_only=True).drop(columns=["seed", "noise"
 # %%
 # NBVAL_IGNORE_OUTPUT
 no_dyn = {seed: m for (kind, seed), m in models.items() if kind == "no_dynamics"}
-bound, bound_curves = cached(P.profile, dynamics.physics_bound, P, no_dyn, P.pendulum.eval_max_noise,
-                             n_particles=P.dynamics.bound_particles, timing=False)
+reference, reference_curves = cached(P.profile, dynamics.physics_reference, P, no_dyn, P.pendulum.eval_max_noise,
+                                     n_particles=P.dynamics.reference_particles, timing=False)
 pixels = dynamics.pixel_reference(P, sorted({0.0, *P.pendulum.eval_max_noise, 1.0}))  # clean to the benchmark's max
-save_table(P.profile, "pendulum_physics_bound", bound)
+save_table(P.profile, "pendulum_physics_reference", reference)
 save_table(P.profile, "pendulum_pixel_reference", pixels)
-bound_mae = bound.groupby("noise", sort=False)[["mae_input", "mae"]].mean()
-bound_mae.join(pixels.set_index("noise")["mae"].rename("pixels_per_frame"), how="left").round(4)
+reference_mae = reference.groupby("noise", sort=False)[["mae_input", "mae"]].mean()
+reference_mae.join(pixels.set_index("noise")["mae"].rename("pixels_per_frame"), how="left").round(4)
 
 # %%
-assert (bound["mae"] > 0).all() and bound["noise"].astype(str).eq("blackout").any()
-levels_bound = {float(k): v for k, v in bound_mae["mae"].items() if k != "blackout"}
+assert (reference["mae"] > 0).all() and reference["noise"].astype(str).eq("blackout").any()
+levels_reference = {float(k): v for k, v in reference_mae["mae"].items() if k != "blackout"}
 fig = plot_mae_bars(summary, P.pendulum.models, PENDULUM_MAE, ylabel="MAE (cos θ, sin θ)", level_name="max noise",
-                    bound=levels_bound)
-save_figure(P.profile, "pendulum_mae_with_bound", fig)
+                    reference=levels_reference)
+save_figure(P.profile, "pendulum_mae_with_reference", fig)
 plt.show()
 
 # %% [markdown]
@@ -161,6 +161,27 @@ print(f"blackout: the limit {by_set.loc['pixel_pf', 'blackout']:.4f}, per frame 
 # below probes why).
 
 # %% [markdown]
+# ### Rounding or truncation
+# The benchmark's code stores the noisy blend in a uint8 array, which truncates; the book's generator rounds
+# (`drfkit.data.noise.blend_uniform_noise`), and the limit's likelihood follows whichever it is told
+# (`quantise`). The same motions, noise levels and pixel draws stored both ways (noise kinds `rkn_uniform` and
+# `rkn_uniform_truncated`), on the first `limit_sequences` test sequences (at most 100): the limit with each
+# likelihood on each storage, and this protocol's models, trained on rounded frames, by their dropout-off pass
+# on both (`dynamics.quantisation_effect`).
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+quantisation = cached(P.profile, dynamics.quantisation_effect, P, models, P.pendulum.eval_max_noise,
+                      n_sequences=min(P.dynamics.limit.sequences, 100), n_particles=max(P.dynamics.limit.particles),
+                      seed=P.seeds[0], timing=False)
+save_table(P.profile, "pendulum_quantisation", quantisation)
+quantisation.groupby(["noise", "estimator", "frames", "likelihood"], dropna=False, sort=False)["mae"].mean() \
+    .unstack("frames").round(4)
+
+# %%
+assert set(quantisation["frames"]) == {"round", "truncate"} and (quantisation["mae"] > 0).all()
+
+# %% [markdown]
 # ### Could a filter reach the paper's DRF from homoscedastic errors as large as the paper's no_dynamics'?
 # The paper's no_dynamics has an MAE of 0.0465 at max noise 0.5 and 0.1003 at 0.75; its DRF 0.0046
 # and 0.0427. The case checked: per-frame estimates equal to the truth plus independent Gaussian errors
@@ -179,7 +200,7 @@ paper_check = cached(P.profile, dynamics.encoder_accuracy_check,
                      studies.pendulum_split(P, "val")["targets"][: min(P.pendulum.val_sequences, 100)],
                      {"paper no_dynamics @0.5": PENDULUM_MAE[0.5]["no_dynamics"],
                       "paper no_dynamics @0.75": PENDULUM_MAE[0.75]["no_dynamics"]},
-                     n_particles=max(P.dynamics.bound_particles, 300), seed=P.seeds[0], timing=False)
+                     n_particles=max(P.dynamics.reference_particles, 300), seed=P.seeds[0], timing=False)
 paper_check = paper_check.assign(paper_drf=[PENDULUM_MAE[0.5]["drf"], PENDULUM_MAE[0.75]["drf"]])
 save_table(P.profile, "pendulum_paper_encoder_check", paper_check)
 assert paper_check["filtered_mae"].lt(paper_check["encoder_mae"]).all()  # filtering the truth's physics helps
@@ -209,11 +230,11 @@ for _, r in paper_check.iterrows():
 from drfkit.data.pendulum import blackout_frames
 from drfkit.report.figures import plot_blackout
 
-curves_dark = pd.concat([dynamics.blackout_curves(P, models), bound_curves], ignore_index=True)
+curves_dark = pd.concat([dynamics.blackout_curves(P, models), reference_curves], ignore_index=True)
 save_table(P.profile, "pendulum_blackout_curves", curves_dark)
 dark_table = dynamics.blackout_table(curves_dark)
 save_table(P.profile, "pendulum_blackout", dark_table)
-fig = plot_blackout(curves_dark, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_bound"])
+fig = plot_blackout(curves_dark, blackout_frames(P.pendulum.seq_len), P.pendulum.models + ["physics_reference"])
 save_figure(P.profile, "pendulum_blackout", fig)
 plt.show()
 
@@ -379,10 +400,10 @@ regime_table.round(4)
 
 # %%
 assert set(regimes["train_noise"]) == set(P.dynamics.regime.train_noise) and regimes["mae"].gt(0).all()
-assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
+assert {"drf", "no_dynamics", "lstm", "physics_reference"} <= set(regimes["model"])
 
 # %% [markdown]
-# `drf_over_no_dynamics` below 1 is where the recursive filter helps the same encoder; `drf_over_bound`
+# `drf_over_no_dynamics` below 1 is where the recursive filter helps the same encoder; `drf_over_reference`
 # (the column keeps its old name) compares it with the particle filter that knows the physics, run on
 # no_dynamics' outputs: a reference, not a limit (below 1, as on the blackout, the DRF does better). Read along a row of panels: training at a
 # higher noise moves the region where every model is accurate to the right (0.75 is no longer out of
@@ -402,8 +423,8 @@ assert {"drf", "no_dynamics", "lstm", "physics_bound"} <= set(regimes["model"])
 # %%
 # NBVAL_IGNORE_OUTPUT
 pieces = {"paper": (evals, mechanism, dark_table)}
-dark_curves = {"paper": curves_dark[curves_dark["model"] != "physics_bound"]}
-bounds = {"paper": bound}
+dark_curves = {"paper": curves_dark[curves_dark["model"] != "physics_reference"]}
+references = {"paper": reference}
 protocol_models = {"paper": models}
 for protocol in P.pendulum.protocols:
     if protocol != "paper":
@@ -413,9 +434,10 @@ for protocol in P.pendulum.protocols:
         pieces[protocol] = (evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, models=trained),
                             cached(P.profile, dynamics.mechanism_table, P, trained, level, timing=False),
                             dynamics.blackout_table(dark_curves[protocol]))
-        bounds[protocol] = cached(P.profile, dynamics.physics_bound, P,
-                                  {seed: m for (kind, seed), m in trained.items() if kind == "no_dynamics"},
-                                  P.pendulum.eval_max_noise, n_particles=P.dynamics.bound_particles, timing=False)[0]
+        references[protocol] = cached(P.profile, dynamics.physics_reference, P,
+                                      {seed: m for (kind, seed), m in trained.items() if kind == "no_dynamics"},
+                                      P.pendulum.eval_max_noise, n_particles=P.dynamics.reference_particles,
+                                      timing=False)[0]
 from drfkit.study.claims.mechanism import pure_noise_training
 
 chance = dynamics.blackout_chance(P)  # always answering (0, 0) on the blackout frames: F2's floor
@@ -475,17 +497,16 @@ interventions[["protocol", "model", "seed", "mae_train", "mae_ood", "mae_blackou
 # %% [markdown]
 # Each protocol's true-physics reference, on its own no_dynamics (seed means; the blackout's over the
 # blackout frames, as the models'), and the DRF's MAE over it: the learned filter against what the
-# particle filter with the exact physics makes of no_dynamics' outputs (below 1: the DRF does better;
-# the columns keep the name `bound`).
+# particle filter with the exact physics makes of no_dynamics' outputs (below 1: the DRF does better).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-bounds_table = pd.concat([b.assign(protocol=name) for name, b in bounds.items()], ignore_index=True)
-save_table(P.profile, "pendulum_physics_bound_protocols", bounds_table)
+references_table = pd.concat([b.assign(protocol=name) for name, b in references.items()], ignore_index=True)
+save_table(P.profile, "pendulum_physics_reference_protocols", references_table)
 drf_mae = protocols[protocols["model"] == "drf"].groupby("protocol", sort=False).mean(numeric_only=True)
-bound_means = bounds_table.groupby(["protocol", "noise"], sort=False)["mae"].mean().unstack("noise")
-pd.DataFrame({f"drf / bound at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" else "mae_blackout"] / bound_means[c]
-              for c in bound_means.columns}).round(2)
+reference_means = references_table.groupby(["protocol", "noise"], sort=False)["mae"].mean().unstack("noise")
+pd.DataFrame({f"drf / reference at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" else "mae_blackout"]
+              / reference_means[c] for c in reference_means.columns}).round(2)
 
 # %% [markdown]
 # The blackout under each protocol, beside the same true-physics reference: where a model's curve stays
@@ -493,9 +514,9 @@ pd.DataFrame({f"drf / bound at {c}": drf_mae[f"mae_{c:g}" if c != "blackout" els
 
 # %%
 by_protocol = pd.concat([c.assign(protocol=name) for name, c in dark_curves.items()]
-                        + [bound_curves.assign(protocol=None)], ignore_index=True)
+                        + [reference_curves.assign(protocol=None)], ignore_index=True)
 every_kind = list(dict.fromkeys(k for pr in P.pendulum.protocols for k in studies.study_models(P, "pendulum", pr)))
-fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), every_kind + ["physics_bound"])
+fig = plot_blackout(by_protocol, blackout_frames(P.pendulum.seq_len), every_kind + ["physics_reference"])
 save_figure(P.profile, "pendulum_blackout_protocols", fig)
 plt.show()
 
@@ -510,7 +531,7 @@ plt.show()
 # **in-distribution** test, where coasting is trained and an LSTM trained the same way coasts too; the
 # book's protocol now trains without any (the third round), so for it, as for the paper's, the blackout
 # is out of distribution. Both rows are judged from `pendulum_protocols.csv` and
-# `pendulum_physics_bound_protocols.csv` (`drfkit.study.claims.judge`).
+# `pendulum_physics_reference_protocols.csv` (`drfkit.study.claims.judge`).
 
 # %%
 # NBVAL_IGNORE_OUTPUT

@@ -197,8 +197,8 @@ print(reading["text"])
 # ## A reference: a filter with the motion model, and a blackout
 # **This reference uses knowledge the learned models do not have**: that a person's depth changes
 # at a nearly constant rate between keyframes (constant velocity, white-acceleration noise for the
-# walkers' turns and the ego car's drift; `drfkit.methods.oracle.constant_velocity_filter`). Fed each no_dynamics
-# seed's per-frame depths and σ (scale and acceleration noise chosen on the validation scenes at
+# walkers' turns and the ego car's drift; `drfkit.methods.references.constant_velocity_filter`). Fed each
+# no_dynamics seed's per-frame depths and σ (scale and acceleration noise chosen on the validation scenes at
 # p = 0.01), it shows what this filter makes of the same per-frame estimates: a reference, not a
 # bound on what any model could reach (a model may do better, e.g. with an encoder trained through a
 # filter). The *blackout* removes the detections of frames 4–6 of every full window (keypoints zeroed,
@@ -212,12 +212,13 @@ print(reading["text"])
 # NBVAL_IGNORE_OUTPUT
 from drfkit.study import dynamics
 
-# per protocol: the reference moves with the no_dynamics whose estimates it filters (the table keeps its name)
-bound = pd.concat([dynamics.pedestrian_bound(P, {s: m for (k, s), m in models[pr].items() if k == "no_dynamics"},
-                                             models[pr]).assign(protocol=pr) for pr in PROTOCOLS], ignore_index=True)
-save_table(P.profile, "pedestrians_bound", bound)
-assert (bound["mae"] > 0).all() and set(bound["noise"]) >= {"blackout"}
-bound.groupby(["protocol", "model", "noise"])["mae"].mean().unstack().round(3)
+# per protocol: the reference moves with the no_dynamics whose estimates it filters
+reference = pd.concat([dynamics.pedestrian_reference(P, {s: m for (k, s), m in models[pr].items() if k == "no_dynamics"},
+                                                     models[pr]).assign(protocol=pr) for pr in PROTOCOLS],
+                      ignore_index=True)
+save_table(P.profile, "pedestrians_reference", reference)
+assert (reference["mae"] > 0).all() and set(reference["noise"]) >= {"blackout"}
+reference.groupby(["protocol", "model", "noise"])["mae"].mean().unstack().round(3)
 
 # %%
 _ = timer.finish()

@@ -25,7 +25,7 @@ def f2_blackout_coasting(blackout: pd.DataFrame, reference, target: float = F2_B
     one number); in_distribution: why the protocol's training frames include pure noise
     (``pure_noise_training``), None when they do not; chance: the MAE of always answering (0, 0) on the
     same frames (NaN: unknown, and then no 'partly')."""
-    rows = blackout[~blackout["model"].isin(["physics_bound", "physics_reference"])]
+    rows = blackout[~blackout["model"].isin(["physics_reference"])]
     stats = {k: seed_interval(g["mae_blackout"]) for k, g in rows.groupby("model", sort=False)}
     drf = stats["drf"]
     others = {k: v for k, v in stats.items() if k in BASELINES}
@@ -57,8 +57,8 @@ def f2_blackout_coasting(blackout: pd.DataFrame, reference, target: float = F2_B
 
 def judge(tables) -> Rows:
     """F2 per protocol, against each protocol's particle-filter reference on its own no_dynamics
-    (``pendulum_physics_bound_protocols.csv``; ``judge.Tables``)."""
-    refs = tables.read("pendulum_physics_bound_protocols")
+    (``pendulum_physics_reference_protocols.csv``; ``judge.Tables``)."""
+    refs = tables.read("pendulum_physics_reference_protocols")
     rows: Rows = []
     for protocol, part in drf_protocols(tables):
         ref = (refs[(refs["protocol"] == protocol) & (refs["noise"].astype(str) == "blackout")]["mae"]
@@ -70,7 +70,7 @@ def judge(tables) -> Rows:
 
 
 CLAIM = CLAIMS.register("F2", Claim(
-    "F2", tables=("pendulum_protocols.csv", "pendulum_physics_bound_protocols.csv"),
+    "F2", tables=("pendulum_protocols.csv", "pendulum_physics_reference_protocols.csv"),
     figures=("pendulum_blackout_protocols.png",), judge=judge, **MECHANISM_EVIDENCE))
 
 __all__ = ["BASELINES", "F2_BLACKOUT_MAE", "f2_blackout_coasting"]

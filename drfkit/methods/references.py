@@ -233,8 +233,8 @@ def like_for_like_mae(per_frame: np.ndarray, test: Any) -> float:
     return float(per_frame.mean())
 
 
-def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.ndarray]], n_particles: int,
-             seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+def reference_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.ndarray]], n_particles: int,
+                 seed: int) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The true-physics particle filter on one encoder's per-frame estimates.
 
     predict(arrays) -> (mean, sigma), each (N, T, 2): the per-frame model (no_dynamics). Its
@@ -242,7 +242,7 @@ def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.n
     then every set of ``sets`` (name -> split arrays) is filtered. Returns (table: noise,
     mae_input, mae (both ``like_for_like_mae``: the blackout set's over its blackout frames, as the
     models'), mae_all_frames, sigma_scale, outlier, n_particles; curves: MAE per frame of the
-    'blackout' set, model = 'physics_bound')."""
+    'blackout' set, model = 'physics_reference')."""
     mean, sigma = predict(val)
     cal = calibrate_particle_filter(mean, sigma, val["targets"], n_particles=min(n_particles, 200), seed=seed)
     rows, curve_rows = [], []
@@ -258,5 +258,5 @@ def bound_on(predict, val: dict[str, np.ndarray], sets: dict[Any, dict[str, np.n
                "n_particles": n_particles}
         rows.append(row)
         if name == "blackout":
-            curve_rows += [{"model": "physics_bound", "frame": f, "mae": float(e)} for f, e in enumerate(per_frame)]
+            curve_rows += [{"model": "physics_reference", "frame": f, "mae": float(e)} for f, e in enumerate(per_frame)]
     return pd.DataFrame(rows), pd.DataFrame(curve_rows, columns=["model", "frame", "mae"])
