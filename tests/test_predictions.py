@@ -33,13 +33,36 @@ def test_cached_equals_uncached_bit_for_bit_and_a_hit_computes_nothing(tmp_path,
     fresh = predict_rates(model, data.inputs, n_samples=7, dropout_rates=[None, 0.3], batch_size=2)
     first = predictions.cached_predict_rates(model, data.inputs, cache=tmp_path, n_samples=7,
                                              dropout_rates=[None, 0.3], seed=3, batch_size=2)
-    assert len(list(tmp_path.glob("*.pt"))) == 1
+    assert len(list(tmp_path.glob("*.pt"))) == 2      # one entry per rate
     monkeypatch.setattr(predictions, "predict_rates", lambda *a, **k: pytest.fail("a cache hit must not predict"))
     again = predictions.cached_predict_rates(model, data.inputs, cache=tmp_path, n_samples=7,
                                              dropout_rates=[None, 0.3], seed=3, batch_size=2)
     for a, b, c in zip(fresh, first, again):
         assert all(torch.equal(u, v) and torch.equal(v, w) for u, v, w in zip(fields(a), fields(b), fields(c)))
         assert a.dropout_p == c.dropout_p and a.n_samples == c.n_samples
+
+
+def test_a_rate_is_the_same_whatever_rates_it_was_asked_with_so_each_is_found_alone(tmp_path, monkeypatch):
+    """The masks' uniforms are drawn once per head chunk for every rate: a rate's prediction is bitwise the same
+    asked alone or among others, so a call finds it in another call's entries and computes only what is missing."""
+    model, data = small_case()
+    torch.manual_seed(4)
+    alone = predict_rates(model, data.inputs, n_samples=6, dropout_rates=[0.3], batch_size=2)[0]
+    torch.manual_seed(4)
+    among = predict_rates(model, data.inputs, n_samples=6, dropout_rates=[0.1, 0.3, 0.5], batch_size=2)[1]
+    assert all(torch.equal(a, b) for a, b in zip(fields(alone), fields(among)))
+    args = dict(cache=tmp_path, n_samples=6, seed=4, batch_size=2)
+    predictions.cached_predict_rates(model, data.inputs, dropout_rates=[0.3], **args)
+    asked = []
+    real = predictions.predict_rates
+    monkeypatch.setattr(predictions, "predict_rates", lambda *a, **k: asked.append(k["dropout_rates"]) or real(*a, **k))
+    both = predictions.cached_predict_rates(model, data.inputs, dropout_rates=[0.1, 0.3], **args)
+    assert asked == [[0.1]] and all(torch.equal(a, b) for a, b in zip(fields(both[1]), fields(alone)))
+    torch.manual_seed(4)
+    fresh = predict_rates(model, data.inputs, n_samples=6, dropout_rates=[0.1], batch_size=2)[0]
+    assert all(torch.equal(a, b) for a, b in zip(fields(both[0]), fields(fresh)))
+    predictions.cached_predict_rates(model, data.inputs, dropout_rates=[0.3, 0.1, 0.3], **args)  # all found
+    assert asked == [[0.1]]
 
 
 def test_the_metrics_through_the_cache_are_those_without_it(tmp_path):

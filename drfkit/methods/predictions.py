@@ -5,9 +5,15 @@ the paper's levels is part of 04's sweep; 04's dropout-rate curves repeat 01's).
 is fixed by what went into it, so the cache file is named by the hash of exactly that:
 
     key = the model's content (sha256 of its configuration and every weight), the inputs'
-          content (sha256 of their bytes), the dropout rates, the number of samples, the seed,
+          content (sha256 of their bytes), the dropout rate, the number of samples, the seed,
           the chunk size (it orders the dropout masks), the device type and the code that computes
           it (``PREDICTION_CODE``: the models, core and the sampling, not the rest of drfkit).
+
+One entry per rate: ``predict_rates`` draws the masks' uniforms once per head chunk for every rate
+(``SharedUniforms``), so a rate's prediction does not depend on which other rates were asked with it
+(tested), and a call finds each rate it asks for wherever it was computed (01's table at the default
+rate is the same member of its five-rate curve; 02's evaluation of a model is 04's curve at that rate).
+A call computes only the rates it does not find.
 
 Change any of these and the file name changes, so a stale entry is never read. Files live
 in ``results/<profile>/predictions/`` (not committed; delete the folder to empty the cache),
@@ -34,7 +40,8 @@ from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
 # 2: the masks are drawn as uniforms shared by the rates, per head chunk (uncertainty.predict_rates); a
 # prediction stored by format 1 holds other (equally valid) draws and is computed again
 # 3: the dropout-off point estimate is stored beside the MC moments
-FORMAT = 3
+# 4: one entry per rate (a call computes the rates it does not find)
+FORMAT = 4
 FIELDS = ("mean", "aleatoric", "epistemic", "total", "point")
 
 
@@ -86,32 +93,44 @@ def prediction_key(model, inputs: torch.Tensor, n_samples: int, rates: list[floa
 
 def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, dropout_rates, seed: int,
                          batch_size: int | None = None, device=None, label: str = "") -> list[Prediction]:
-    """``drfkit.methods.uncertainty.predict_rates`` seeded with ``seed``, read from ``cache`` when the
-    same prediction was made before (the same numbers, bit for bit), else computed and stored.
+    """``drfkit.methods.uncertainty.predict_rates`` seeded with ``seed``, each rate read from ``cache`` when the
+    same prediction was made before (the same numbers, bit for bit), the others computed together and stored.
 
     ``cache=None`` switches the cache off; ``label`` is kept in the file for a reader.
     """
     x = as_model_input(model, inputs)
     rates = [model.default_dropout_p if p is None else float(p) for p in dropout_rates]
-    path = None
+    paths = {}
     if cache is not None:
-        path = Path(cache) / f"{prediction_key(model, x, n_samples, rates, seed, batch_size, device)}.pt"
-    if path is not None and path.exists():
-        try:
-            stored = torch_load_checked(path)
-            if stored.get("format") == FORMAT and len(stored["predictions"]) == len(rates):
-                return [Prediction(**{f: p[f] for f in FIELDS}, n_samples=p["n_samples"], dropout_p=p["dropout_p"])
-                        for p in stored["predictions"]]
-        except (CorruptArtefactError, KeyError, TypeError, AttributeError):
-            pass  # damaged: computed again and overwritten below
-    torch.manual_seed(seed)  # the dropout masks are part of the prediction
-    preds = predict_rates(model, x, n_samples=n_samples, dropout_rates=rates, batch_size=batch_size, device=device)
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_torch_save(path, {"format": FORMAT, "label": label, "predictions": [
-            {**{f: getattr(p, f) for f in FIELDS}, "n_samples": p.n_samples, "dropout_p": p.dropout_p}
-            for p in preds]})
-    return preds
+        paths = {p: Path(cache) / f"{prediction_key(model, x, n_samples, [p], seed, batch_size, device)}.pt"
+                 for p in dict.fromkeys(rates)}
+    found = {p: pred for p, path in paths.items() if (pred := _read(path)) is not None}
+    missing = [p for p in dict.fromkeys(rates) if p not in found]
+    if missing:
+        torch.manual_seed(seed)  # the dropout masks are part of the prediction
+        computed = predict_rates(model, x, n_samples=n_samples, dropout_rates=missing, batch_size=batch_size,
+                                 device=device)
+        for p, pred in zip(missing, computed):
+            found[p] = pred
+            if p in paths:
+                paths[p].parent.mkdir(parents=True, exist_ok=True)
+                atomic_torch_save(paths[p], {"format": FORMAT, "label": label, "prediction": {
+                    **{f: getattr(pred, f) for f in FIELDS}, "n_samples": pred.n_samples, "dropout_p": pred.dropout_p}})
+    return [found[p] for p in rates]
+
+
+def _read(path: Path) -> Prediction | None:
+    """A stored prediction, or None when absent, of another format or damaged (then computed again)."""
+    if not path.exists():
+        return None
+    try:
+        stored = torch_load_checked(path)
+        if stored.get("format") == FORMAT:
+            p = stored["prediction"]
+            return Prediction(**{f: p[f] for f in FIELDS}, n_samples=p["n_samples"], dropout_p=p["dropout_p"])
+    except (CorruptArtefactError, KeyError, TypeError, AttributeError):
+        pass
+    return None
 
 
 __all__ = ["PREDICTION_CODE", "cached_predict_rates", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]
