@@ -43,6 +43,9 @@ from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
 # 4: one entry per rate (a call computes the rates it does not find)
 FORMAT = 4
 FIELDS = ("mean", "aleatoric", "epistemic", "total", "point")
+# sequences per prediction chunk of every test-set evaluation: one batch size (it orders the masks' draws), so a
+# later call on the same inputs (calibration, the curves, the mechanism tables) finds the evaluation's entry
+EVAL_BATCH_SIZE = 256
 
 
 def weights_sha256(model) -> str:
@@ -119,6 +122,14 @@ def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, d
     return [found[p] for p in rates]
 
 
+def point_and_sigma(model, images, *, cache: Path | None, n_samples: int, seed: int):
+    """The dropout-off point estimate and the MC-dropout total sigma, numpy (N, T, out), of ``model`` on ``images``,
+    seeded, at the evaluation's batch size (the same cache entry as the studies' evaluation of those inputs)."""
+    pred = cached_predict_rates(model, images, cache=cache, n_samples=n_samples, dropout_rates=[None], seed=seed,
+                                batch_size=EVAL_BATCH_SIZE)[0]
+    return pred.point.numpy(), pred.total.numpy()
+
+
 def _read(path: Path) -> Prediction | None:
     """A stored prediction, or None when absent, of another format or damaged (then computed again)."""
     if not path.exists():
@@ -133,4 +144,4 @@ def _read(path: Path) -> Prediction | None:
     return None
 
 
-__all__ = ["PREDICTION_CODE", "cached_predict_rates", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]
+__all__ = ["EVAL_BATCH_SIZE", "PREDICTION_CODE", "cached_predict_rates", "point_and_sigma", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]

@@ -31,7 +31,7 @@ from drfkit.data.noise import Noise
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
 from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
 from drfkit.util.paths import predictions_dir
-from drfkit.methods.predictions import cached_predict_rates
+from drfkit.methods.predictions import point_and_sigma
 from drfkit.util.progress import steps
 
 
@@ -44,11 +44,10 @@ def blackout_split(P, split: str) -> dict[str, np.ndarray]:
 
 
 def _point_and_sigma(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """The dropout-off point estimate and the MC-dropout total sigma of ``model`` on arrays['images']
-    (any model input), seeded."""
-    pred = cached_predict_rates(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
-                                dropout_rates=[None], seed=seed, batch_size=256)[0]
-    return pred.point.numpy(), pred.total.numpy()
+    """``predictions.point_and_sigma`` of ``model`` on arrays['images'] (any model input) with the profile's cache and
+    samples."""
+    return point_and_sigma(model, arrays["images"], cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
+                           seed=seed)
 
 
 def mechanism_table(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "test") -> pd.DataFrame:

@@ -17,14 +17,12 @@ import torch
 from drfkit.core import metrics
 from drfkit.core.metrics import prediction_metrics, t975  # noqa: F401 (defined with the metrics)
 from drfkit.util.paths import predictions_dir
-from drfkit.methods.predictions import cached_predict_rates
+from drfkit.methods.predictions import EVAL_BATCH_SIZE, cached_predict_rates
 from drfkit.util.progress import steps
 from drfkit.methods.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
-# sequences per prediction chunk of every test-set evaluation: one batch size, so a later call on the same inputs
-# (calibration, the curves) finds the evaluation's cached prediction (drfkit.methods.predictions keys it)
-EVAL_BATCH_SIZE = 256
+
 # The values each metric can take (PICP is a fraction): interval ends are clipped to them.
 METRIC_RANGES = {"mae": (0.0, math.inf), "picp": (0.0, 1.0), "mpiw": (0.0, math.inf), "crps": (0.0, math.inf),
                  "cal_error": (0.0, 1.0)}

@@ -32,7 +32,7 @@ from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET
 from drfkit.methods.references import reference_on
 from drfkit.util.io import atomic_write_json, param_hash
-from drfkit.methods.predictions import cached_predict_rates
+from drfkit.methods.predictions import point_and_sigma
 from drfkit.util.progress import steps
 from drfkit.methods.protocols import ABLATION_BUDGETS, REGIME_BASES, regime_variant
 from drfkit.methods.train import load_checkpoint
@@ -71,10 +71,8 @@ def _model(name: str, seed: int, budget_name: str, out, progress: bool):
 
 
 def _point_and_sigma(model, arrays, n_samples: int, seed: int, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
-    """The dropout-off point estimate and the MC-dropout total sigma of ``model`` on arrays['images']."""
-    pred = cached_predict_rates(model, arrays["images"], cache=cache, n_samples=n_samples, dropout_rates=[None],
-                                seed=seed, batch_size=256)[0]
-    return pred.point.numpy(), pred.total.numpy()
+    """``predictions.point_and_sigma`` of ``model`` on arrays['images'] (the studies' evaluation, the same cache entry)."""
+    return point_and_sigma(model, arrays["images"], cache=cache, n_samples=n_samples, seed=seed)
 
 
 def model_row(kind: str, train_noise: float, seed: int, budget_name: str, out, levels, n_test: int, n_samples: int,
