@@ -468,3 +468,38 @@ def test_measure_interleaved_reports_the_slower_function_as_slower():
     out = clock.measure_interleaved({"fast": lambda: None, "slow": lambda: _time.sleep(0.002)},
                                     min_run_time=0.01, min_rounds=3)
     assert out["slow"] > 0.0015 and out["fast"] < out["slow"]
+
+
+def test_what_is_not_timed_runs_on_its_own_threads_and_the_times_on_the_callers(monkeypatch):
+    """untimed_threads: the gates' fitting and the metric passes run on that many torch threads, the interleaved
+    timing rounds on the caller's count, which is restored afterwards; the metrics are those of a one-thread run."""
+    import pandas as pd
+
+    from drfkit.methods import gate_evaluation as ge
+    from drfkit.study import studies
+
+    val, test = keypoint_data(seed=11), keypoint_data(seed=12)
+    monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise=None, protocol="paper":
+                        val if split == "val" else test)
+    seen = {"fit": set(), "timed": set()}
+    real_fit, real_measure = gating_study.fit_gate, ge.measure_interleaved
+    monkeypatch.setattr(gating_study, "fit_gate", lambda *a, **k: seen["fit"].add(torch.get_num_threads())
+                        or real_fit(*a, **k))
+    monkeypatch.setattr(ge, "measure_interleaved", lambda *a, **k: seen["timed"].add(torch.get_num_threads())
+                        or real_measure(*a, **k))
+    P = build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4,
+                           gating_picp_tolerance=0.01, gating_sweep_points=3, gating_timing_frames=0,
+                           interval_level=0.95), "a test")
+    models = {("drf", 0): tiny_drf()}
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        one = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001, sweep=False)
+        two = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001, sweep=False,
+                                        untimed_threads=2)
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
+    assert seen == {"fit": {1, 2}, "timed": {1}}
+    metrics = ["setting", "fraction", "picp", "mpiw", "mae"]
+    pd.testing.assert_frame_equal(one["table"][metrics], two["table"][metrics], atol=1e-6)

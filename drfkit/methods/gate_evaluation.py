@@ -8,6 +8,7 @@ profile-driven study that calls them per seed is ``drfkit.study.gating_study``.
 """
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ from drfkit.core.metrics import prediction_metrics
 from drfkit.methods.gating import (ALWAYS, NEVER, RANDOM_SEED_OFFSET, SETTINGS, Gate, GatedPrediction, apply_gating,
                                    assemble, competency_score, eval_mode, oracle_selection, real_mask, run_setting,
                                    select_frames, uncertainty_stage)
-from drfkit.methods.timing.clock import measure_interleaved, timing_subset
+from drfkit.methods.timing.clock import measure_interleaved, timing_subset, torch_threads
 from drfkit.methods.uncertainty import as_model_input
 from drfkit.models.parts import check_dropout_p, check_n_samples
 
@@ -34,7 +35,7 @@ def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: 
 def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float | None = None,
                   level: float = 0.95, seed: int = 0, min_run_time: float = 0.3, device=None,
                   thresholds: dict[str, float] | None = None, timing_frames: int = 0,
-                  other_gates: dict[str, Gate] | None = None) -> pd.DataFrame:
+                  other_gates: dict[str, Gate] | None = None, untimed_threads: int | None = None) -> pd.DataFrame:
     """The four settings on the TEST set (a SequenceData) with a gate fitted beforehand.
 
     Metrics: the features run once, then one deterministic and one always-dropout pass (masks
@@ -51,6 +52,8 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     (name -> a gate fitted elsewhere, e.g. on validation at the training noise) adds its Kalman-gain row
     'kalman_gain@<name>' (its own direction and threshold) and random twin 'random@<name>', from the same
     passes and timed in the same run, whole inference included: one pass of the test set serves every gate.
+    ``untimed_threads``: torch threads for the metric passes (features, the deterministic and always-dropout passes;
+    None: the caller's count); the times are always taken at the caller's count.
 
     Times, per real frame, all measured in this call on the same inputs (interleaved medians),
     on about ``timing_frames`` real frames of evenly spaced test sequences (``timing_subset``;
@@ -80,55 +83,58 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     rnd = dict(random_seed=seed + RANDOM_SEED_OFFSET)
 
     was = eval_mode(model)
+    untimed = torch_threads(untimed_threads) if untimed_threads else contextlib.nullcontext()
     try:
-        h, gains = model.features(x, return_gains=True)
-        # Metrics from two full passes (``assemble``): every setting's frames take the same
-        # deterministic or always-dropout result, so settings differ only in which frames they select.
-        passes = {}
-        for setting in ("no_dropout", "always"):
-            torch.manual_seed(seed)
-            passes[setting] = uncertainty_stage(model, h, gains, real, setting, **common)
-        # name -> (setting, stage keyword arguments); random twins take the Kalman-gain count
-        variants: dict[str, tuple[str, dict[str, Any]]] = {
-            "no_dropout": ("no_dropout", {}), "always": ("always", {})}
-        rows = []
+        with untimed:  # the metric passes, on ``untimed_threads``
+            h, gains = model.features(x, return_gains=True)
+            # Metrics from two full passes (``assemble``): every setting's frames take the same
+            # deterministic or always-dropout result, so settings differ only in which frames they select.
+            passes = {}
+            for setting in ("no_dropout", "always"):
+                torch.manual_seed(seed)
+                passes[setting] = uncertainty_stage(model, h, gains, real, setting, **common)
+            # name -> (setting, stage keyword arguments); random twins take the Kalman-gain count
+            variants: dict[str, tuple[str, dict[str, Any]]] = {
+                "no_dropout": ("no_dropout", {}), "always": ("always", {})}
+            rows = []
 
-        def evaluate(name, setting, extra):
-            pred = passes[setting] if setting in passes else assemble(
-                passes["no_dropout"], passes["always"],
-                select_frames(setting, gains, real, **extra, kind=model.config.get("kind")))
-            variants[name] = (setting, extra)
-            rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
-                                                                  else ALWAYS),
-                         "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
-            return pred
+            def evaluate(name, setting, extra):
+                pred = passes[setting] if setting in passes else assemble(
+                    passes["no_dropout"], passes["always"],
+                    select_frames(setting, gains, real, **extra, kind=model.config.get("kind")))
+                variants[name] = (setting, extra)
+                rows.append({"setting": name, "threshold": extra.get("threshold", NEVER if setting == "no_dropout"
+                                                                      else ALWAYS),
+                             "n_selected": int(pred.selected[real].sum()), **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
+                return pred
 
-        evaluate("no_dropout", "no_dropout", {})
-        evaluate("always", "always", {})
-        twin_of: dict[str, str] = {}  # random twin -> its Kalman-gain row
-        # the oracle twins of the sweep: as many frames, those of largest true error (metrics only: never timed)
-        abs_error = (passes["no_dropout"].mean - y).abs().mean(dim=-1)
-        gated = {"kalman_gain": (gate.direction, gate.threshold),
-                 **{f"kalman_gain@{k}": (g.direction, g.threshold) for k, g in (other_gates or {}).items()},
-                 **{k: (gate.direction, thr) for k, thr in (thresholds or {}).items()}}
-        for name, (direction, thr) in gated.items():
-            n_sel = int(evaluate(name, "kalman_gain", {"direction": direction, "threshold": thr}).selected.sum())
-            twin = ("random" if name == "kalman_gain" else name.replace("kalman_gain@", "random@")
-                    if name.startswith("kalman_gain@") else f"random:{name}")
-            pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
-            assert int(pred.selected.sum()) == n_sel
-            rows[-1]["threshold"] = thr
-            twin_of[twin] = name
-            if name in (thresholds or {}):
-                pred = assemble(passes["no_dropout"], passes["always"], oracle_selection(abs_error, real, n_sel))
-                rows.append({"setting": f"oracle:{name}", "threshold": thr, "n_selected": n_sel,
-                             **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
+            evaluate("no_dropout", "no_dropout", {})
+            evaluate("always", "always", {})
+            twin_of: dict[str, str] = {}  # random twin -> its Kalman-gain row
+            # the oracle twins of the sweep: as many frames, those of largest true error (metrics only: never timed)
+            abs_error = (passes["no_dropout"].mean - y).abs().mean(dim=-1)
+            gated = {"kalman_gain": (gate.direction, gate.threshold),
+                     **{f"kalman_gain@{k}": (g.direction, g.threshold) for k, g in (other_gates or {}).items()},
+                     **{k: (gate.direction, thr) for k, thr in (thresholds or {}).items()}}
+            for name, (direction, thr) in gated.items():
+                n_sel = int(evaluate(name, "kalman_gain", {"direction": direction, "threshold": thr}).selected.sum())
+                twin = ("random" if name == "kalman_gain" else name.replace("kalman_gain@", "random@")
+                        if name.startswith("kalman_gain@") else f"random:{name}")
+                pred = evaluate(twin, "random", {**rnd, "n_random": n_sel})
+                assert int(pred.selected.sum()) == n_sel
+                rows[-1]["threshold"] = thr
+                twin_of[twin] = name
+                if name in (thresholds or {}):
+                    pred = assemble(passes["no_dropout"], passes["always"], oracle_selection(abs_error, real, n_sel))
+                    rows.append({"setting": f"oracle:{name}", "threshold": thr, "n_selected": n_sel,
+                                 **_metrics(pred, y, real, level, passes["no_dropout"].mean)})
 
-        # ---- times, on the timed subset only
+        # ---- times, on the timed subset only, at the caller's thread count
         idx = timing_subset(real.sum(dim=1), timing_frames).to(device)
         whole_set = idx.numel() == x.shape[0]
         x_t, real_t = (x, real) if whole_set else (x[idx], real[idx])
         h_t, gains_t = (h, gains) if whole_set else model.features(x_t, return_gains=True)
+
         def n_timed_selected(kg_name: str) -> int:  # the Kalman-gain row's count on the timed subset
             kg_extra = variants[kg_name][1]
             return int(apply_gating(competency_score(gains_t, kg_extra["direction"]), kg_extra["threshold"],

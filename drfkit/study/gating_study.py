@@ -8,12 +8,14 @@ competency and how the threshold is chosen).
 """
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import pandas as pd
 
 from drfkit.methods.gate_evaluation import evaluate_gate, sweep_gate
 from drfkit.methods.gating import fit_gate
+from drfkit.methods.timing.clock import torch_threads
 from drfkit.study import registry
 from drfkit.util.progress import steps
 
@@ -39,7 +41,8 @@ def gated_models(models: dict) -> dict[int, Any]:
 
 
 def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3,
-                 val_noise: float | None = None, sweep: bool = True) -> dict[str, pd.DataFrame]:
+                 val_noise: float | None = None, sweep: bool = True, untimed_threads: int | None = None
+                 ) -> dict[str, pd.DataFrame]:
     """Fit two gates per DRF seed on validation data, then evaluate and sweep them on the test set, in one pass of
     the test set per seed (the DRF: the models that declare ``competency_gain``, ``gated_models``).
 
@@ -50,7 +53,8 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     same interleaved run. The sweep's thresholds tune nothing, and claim C7 is judged on them; its rows hold
     Kalman-gain, random and oracle gating at each threshold of the first gate (``sweep=False``: an empty 'sweep',
     the settings' metrics unchanged). Times are measured on about ``P.gating.timing_frames`` frames of evenly
-    spaced test sequences (0: all), metrics on all of them. Returns
+    spaced test sequences (0: all), at the caller's torch threads; the gates' fitting and the metric passes, which
+    are not timed, on ``untimed_threads`` (None: the caller's). Returns
     {'table': one row per seed and setting, 'sweep': one row per seed, method and threshold,
     'validation': the candidate table per seed, 'table_train': the four settings with the training-noise gate
     (no_dropout and always are the first table's rows), 'train_gate': per seed, what the training-noise gate
@@ -75,10 +79,12 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     tables, sweeps, vals, train_tables, train_gates = [], [], [], [], []
     for seed, model in steps(sorted(drf.items()), f"{study}: gating per DRF seed"):
         model = model.to(device)
-        gate, val_table = fit_gate(model, val, seed=seed, **fit)
-        gate_train, _ = fit_gate(model, val_train, seed=seed, **fit)
+        with torch_threads(untimed_threads) if untimed_threads else contextlib.nullcontext():
+            gate, val_table = fit_gate(model, val, seed=seed, **fit)
+            gate_train, _ = fit_gate(model, val_train, seed=seed, **fit)
         kwargs = dict(n_samples=P.uncertainty.n_samples, level=P.uncertainty.interval_level, seed=seed, device=device,
-                      min_run_time=min_run_time, timing_frames=P.gating.timing_frames, other_gates={"train": gate_train})
+                      min_run_time=min_run_time, timing_frames=P.gating.timing_frames, other_gates={"train": gate_train},
+                      untimed_threads=untimed_threads)
         table, swept = (sweep_gate(model, gate, test, **kwargs) if sweep
                         else (evaluate_gate(model, gate, test, **kwargs), pd.DataFrame()))
         ident = {"study": study, "seed": seed, "noise": level_}

@@ -112,6 +112,9 @@ modes.pivot_table(index=["model", "checkpoint", "epoch"], columns="mode", values
 # seeds with a 95 % t-interval; the paper's values are the black ticks.
 
 # %%
+# the uncertainty section's dropout rates first: one pass per (model, level) computes them all, and this table's
+# default rate is read from it (predictions are cached per rate, drfkit.methods.predictions)
+curve = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, P.uncertainty.dropout_rates)
 evals = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise)
 summary = summarise(evals, ["model", "noise"])
 save_table(P.profile, "pendulum_eval", evals)
@@ -140,8 +143,7 @@ plt.show()
 # `n_samples` MC dropout passes through the decoder, at several dropout rates (the paper's curve).
 
 # %%
-curve = evaluate_study(P, "pendulum", P.pendulum.eval_max_noise, P.uncertainty.dropout_rates)
-curve_summary = summarise(curve, ["model", "noise", "dropout_p"])
+curve_summary = summarise(curve, ["model", "noise", "dropout_p"])  # the curve evaluated above
 save_table(P.profile, "pendulum_picp_mpiw", curve_summary)
 assert set(curve["dropout_p"]) == set(P.uncertainty.dropout_rates)
 
