@@ -257,6 +257,20 @@ def test_template_matching_reads_clean_and_noisy_frames():
     assert np.abs(np.angle(np.exp(1j * (est - theta)))).max() < 0.1
 
 
+def test_template_matching_on_the_distinct_images_names_the_angle_a_search_over_every_template_names():
+    """The renderer draws one image per arc, so template_angles scores each distinct image once: the angle it names
+    is the first of the best over all n_angles templates, as a search over every one of them names it."""
+    d = pend.generate_pendulum(4, 20, Noise("rkn_uniform", 0.6), 9)
+    frames = np.concatenate([d["images"], d["clean"]]).reshape(-1, 576).astype(np.float32)
+    angles = -np.pi + 2.0 * np.pi * np.arange(512) / 512
+    every = pend.render_pendulum(angles).reshape(512, -1).astype(np.float32)
+    every -= every.mean(axis=1, keepdims=True)
+    every /= np.linalg.norm(every, axis=1, keepdims=True)
+    brute = angles[np.argmax((frames - frames.mean(1, keepdims=True)) @ every.T, axis=1)]
+    est = references.template_angles(np.concatenate([d["images"], d["clean"]]), n_angles=512).reshape(-1)
+    assert np.array_equal(est, brute)
+
+
 def test_constant_velocity_filter():
     n, steps, dt = 200, 30, 0.5
     rng = np.random.default_rng(0)

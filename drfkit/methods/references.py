@@ -170,7 +170,12 @@ def template_angles(images: np.ndarray, n_angles: int = 4096, chunk: int = 4096)
     images = np.asarray(images)
     pend.check_images(images.reshape(-1, 1, pend.IMAGE_SIZE, pend.IMAGE_SIZE))
     angles = -np.pi + 2.0 * np.pi * np.arange(n_angles) / n_angles
-    templates = pend.render_pendulum(angles).reshape(n_angles, -1).astype(np.float32)
+    templates = pend.render_pendulum(angles).reshape(n_angles, -1)
+    # the renderer draws one image per arc of angles (``drfkit.data.rod_bank``): score each distinct image once,
+    # in the order of its first angle, so the argmax (the first of the best) names the same angle as over all
+    _, first = np.unique(templates, axis=0, return_index=True)
+    first = np.sort(first)
+    angles, templates = angles[first], templates[first].astype(np.float32)
     templates -= templates.mean(axis=1, keepdims=True)
     templates /= np.linalg.norm(templates, axis=1, keepdims=True)
     frames = images.reshape(-1, templates.shape[1]).astype(np.float32)
