@@ -404,18 +404,17 @@ assert {"drf", "no_dynamics", "lstm", "physics_reference"} <= set(regimes["model
 
 # %% [markdown]
 # `drf_over_no_dynamics` below 1 is where the recursive filter helps the same encoder; `drf_over_reference`
-# (the column keeps its old name) compares it with the particle filter that knows the physics, run on
-# no_dynamics' outputs: a reference, not a limit (below 1, as on the blackout, the DRF does better). Read along a row of panels: training at a
+# compares it with the particle filter that knows the physics, run on no_dynamics' outputs: a reference, not a limit (below 1, as on the blackout, the DRF does better). Read along a row of panels: training at a
 # higher noise moves the region where every model is accurate to the right (0.75 is no longer out of
 # distribution for a model trained at 1.0), and the blackout column shows which models carry the
 # state through frames that hold nothing.
 
 # %% [markdown]
 # ## Both protocols side by side
-# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the third round's
-# choice for the DRF, trained without pure-noise frames, with the wider encoder, and the same recipe,
-# encoder and training data for the LSTM, no_dynamics and the known-dynamics filter, each on the book's
-# schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (dropout off), on
+# The paper's protocol (the models above) and the book's (`drfkit.methods.protocols`: the paper's DRF as
+# written and the calibrated-gain DRF, trained without pure-noise frames with the recipe that fits the mean and
+# the wider encoder, and the same recipe, encoder and training data for the LSTM, no_dynamics and the
+# known-dynamics filter, each on the book's schedule `pend_book_*`), on the same test sets: MAE at every evaluated noise level (dropout off), on
 # the blackout, and the mechanism checks. A protocol not listed in `pend_protocols` is not trained
 # here; `python -m drfkit train --profile paper --study pendulum --protocol book --threads 1`
 # trains (or resumes) its runs.
