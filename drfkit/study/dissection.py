@@ -16,7 +16,7 @@ import torch
 from drfkit.data.pendulum import blackout_frames
 from drfkit.methods import dissection as dis
 from drfkit.study import studies
-from drfkit.study.dynamics import blackout_split
+from drfkit.study.dynamics import blackout_split, dropout_off_point
 from drfkit.util.progress import steps
 
 
@@ -29,15 +29,8 @@ def _prepared(model, arrays: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch
 
 def _dropout_off_mae(model, arrays: dict[str, np.ndarray], frames: slice = slice(None)) -> float:
     """MAE of the dropout-off output on ``frames`` of every sequence (a model without a filter too)."""
-    was_training = model.training
-    model.eval()
-    try:
-        with torch.no_grad():
-            images = torch.from_numpy(arrays["images"])
-            mean = torch.cat([model(images[i:i + 200])[0] for i in range(0, images.shape[0], 200)])
-    finally:
-        model.train(was_training)
-    return float(np.abs(mean.double().numpy() - arrays["targets"])[:, frames].mean())
+    mean = dropout_off_point(model, arrays["images"])
+    return float(np.abs(mean.astype(np.float64) - arrays["targets"])[:, frames].mean())
 
 
 def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", fit_split: str = "val"

@@ -248,13 +248,13 @@ def quantisation_effect(P, models: dict[tuple[str, int], Any], levels, n_sequenc
                 rows += [{"noise": level, "estimator": name, "seed": np.nan, "frames": stored, "likelihood": likelihood,
                           "mae": float(abs_error_per_frame(est, targets).mean())} for name, est in estimates.items()]
             for (kind, model_seed), model in models.items():
-                point = _dropout_off_point(model, images)
+                point = dropout_off_point(model, images)
                 rows.append({"noise": level, "estimator": kind, "seed": model_seed, "frames": stored,
                              "likelihood": np.nan, "mae": float(abs_error_per_frame(point, targets).mean())})
     return pd.DataFrame(rows)
 
 
-def _dropout_off_point(model, images: np.ndarray, chunk: int = 256) -> np.ndarray:
+def dropout_off_point(model, images: np.ndarray, chunk: int = 256) -> np.ndarray:
     """The dropout-off output (N, T, out) of ``model`` on images uint8 (N, T, 24, 24); its mode restored after."""
     was = model.training
     model.eval()
