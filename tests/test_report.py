@@ -196,10 +196,9 @@ def test_readme_section_links_claims_md_and_report_md_where_they_are(tmp_path, m
 
 
 def test_every_claim_links_evidence_that_the_paper_profile_has():
-    """The claim map names files the committed paper profile holds (a renamed table or figure fails, unless
-    ``named_result`` finds it under the name it had before the rename)."""
+    """The claim map names files the committed paper profile holds (a renamed table or figure fails)."""
     from drfkit.study.claims import CLAIM_EVIDENCE, CLAIM_SOURCES
-    from drfkit.util.paths import REPO_ROOT, named_result
+    from drfkit.util.paths import REPO_ROOT
 
     assert set(CLAIM_EVIDENCE) == set(CLAIM_SOURCES)
     root = REPO_ROOT / "results" / "paper"
@@ -207,43 +206,9 @@ def test_every_claim_links_evidence_that_the_paper_profile_has():
         assert (root / "executed" / f"{notebook}.ipynb").exists(), cid
         assert f"## {section}" in (REPO_ROOT / "notebooks" / "src" / f"{notebook}.py").read_text(), (cid, section)
         for name in tables:
-            assert named_result(root / "tables", Path(name).stem, Path(name).suffix).exists(), (cid, name)
+            assert (root / "tables" / name).exists(), (cid, name)
         for name in figures:
-            assert named_result(root / "figures", Path(name).stem, Path(name).suffix).exists(), (cid, name)
-
-
-def test_a_table_or_figure_made_before_the_rename_is_read_until_one_of_the_new_name_exists(tmp_path, monkeypatch):
-    """``named_result``: the old-named file where only it exists, the new one once both do (or neither does), for
-    the claims' tables (``judge.Tables``), the claims' evidence links and the README's figures."""
-    from types import SimpleNamespace
-
-    from drfkit.report.writers import figure_lines
-    from drfkit.study.claims.judge import Tables
-    from drfkit.util.paths import named_result
-
-    monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    tables, figures = tmp_path / "p" / "tables", tmp_path / "p" / "figures"
-    tables.mkdir(parents=True), figures.mkdir()
-    old = tables / "pendulum_physics_bound_protocols.csv"
-    pd.DataFrame({"protocol": ["paper"], "noise": ["blackout"], "mae": [0.03]}).to_csv(old, index=False)
-    assert named_result(tables, "pendulum_physics_reference_protocols") == old
-    assert Tables(SimpleNamespace(profile="p")).read("pendulum_physics_reference_protocols")["mae"].tolist() == [0.03]
-    assert "(tables/pendulum_physics_bound_protocols.csv)" in claims.evidence_links("F2", folder=tmp_path / "p")
-    new = tables / "pendulum_physics_reference_protocols.csv"
-    pd.DataFrame({"protocol": ["paper"], "noise": ["blackout"], "mae": [0.02]}).to_csv(new, index=False)
-    assert named_result(tables, "pendulum_physics_reference_protocols") == new
-    assert Tables(SimpleNamespace(profile="p")).read("pendulum_physics_reference_protocols")["mae"].tolist() == [0.02]
-    assert "(tables/pendulum_physics_reference_protocols.csv)" in claims.evidence_links("F2", folder=tmp_path / "p")
-    # neither file, or a name never renamed: the name itself (what a writer writes)
-    assert named_result(tables, "pedestrians_reference") == tables / "pedestrians_reference.csv"
-    assert named_result(tables, "pendulum_protocols") == tables / "pendulum_protocols.csv"
-    # the README's figure links the file there is
-    (figures / "pendulum_mae_with_bound.png").write_bytes(b"png")
-    linked = "\n".join(figure_lines("p", ["pendulum_mae_with_reference"], "make reproduce", "results/p/"))
-    assert "(results/p/figures/pendulum_mae_with_bound.png)" in linked
-    (figures / "pendulum_mae_with_reference.png").write_bytes(b"png")
-    linked = "\n".join(figure_lines("p", ["pendulum_mae_with_reference"], "make reproduce", "results/p/"))
-    assert "(results/p/figures/pendulum_mae_with_reference.png)" in linked and "_bound" not in linked
+            assert (root / "figures" / name).exists(), (cid, name)
 
 
 def test_blackout_figure_draws_one_panel_per_protocol_with_the_reference_in_each():

@@ -12,7 +12,7 @@ import pandas as pd
 from drfkit.models.kinds import MODEL_CLASSES, model_spec
 from drfkit.report.figures import label, paper_value
 from drfkit.util.io import atomic_savefig, atomic_write_csv
-from drfkit.util.paths import figures_dir, named_result, tables_dir
+from drfkit.util.paths import figures_dir, tables_dir
 from drfkit.methods.protocols import summarise_ablation
 
 
@@ -95,7 +95,7 @@ def dynamics_lines(tables: Path) -> list[str]:
     """README lines of the dynamics study (notebook 02): both protocols beside the true-physics
     reference, and the protocol ablation on validation data; [] when notebook 02 has not written them."""
     lines: list[str] = []
-    protocols, reference = tables / "pendulum_protocols.csv", named_result(tables, "pendulum_physics_reference")
+    protocols, reference = tables / "pendulum_protocols.csv", tables / "pendulum_physics_reference.csv"
     if protocols.exists() and reference.exists():
         pt = pd.read_csv(protocols)
         mae_cols = [c for c in pt if c.startswith("mae_") and c != "mae_after_blackout"]
@@ -116,7 +116,7 @@ def dynamics_lines(tables: Path) -> list[str]:
                          + " |")
         # each protocol's reference on its own no_dynamics when notebook 02 wrote them (like for like), else the
         # paper protocol's; the noise column holds levels and 'blackout': named as the protocol table's columns
-        per_protocol = named_result(tables, "pendulum_physics_reference_protocols")
+        per_protocol = tables / "pendulum_physics_reference_protocols.csv"
         references = ({name: g.groupby("noise")["mae"].mean() for name, g in
                        pd.read_csv(per_protocol).groupby("protocol", sort=False)} if per_protocol.exists() else {"—": b})
         for name, rp in references.items():
@@ -198,7 +198,7 @@ def figure_lines(profile: str, names, command: str, prefix: str) -> list[str]:
     captions = dict(HEADLINE_FIGURES)
     lines = []
     for name in names:
-        path = named_result(results_dir(profile) / "figures", name, ".png")
+        path = results_dir(profile) / "figures" / f"{name}.png"
         if path.exists():
             lines += [f"![{captions[name]}]({prefix}figures/{path.name})", f"*{captions[name]}* (`{command}`)", ""]
     return lines

@@ -19,12 +19,12 @@ from drfkit.study import registry
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO
 from drfkit.study.claims.table import CLAIMS, Rows, read_claims, upsert
 from drfkit.study.claims.verdicts import rows_of
-from drfkit.util.paths import named_result, results_dir, tables_dir
+from drfkit.util.paths import results_dir, tables_dir
 from drfkit.util.registry import Registry
 
 
 def _read(P, name: str) -> pd.DataFrame | None:
-    path = named_result(tables_dir(P.profile), name)
+    path = tables_dir(P.profile) / f"{name}.csv"
     return pd.read_csv(path) if path.exists() else None
 
 

@@ -9,14 +9,13 @@ them, and one taken out again is not."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable
 
 import pandas as pd
 
 from drfkit.study.claims.verdicts import REPRODUCED
 from drfkit.util.io import atomic_write_csv, atomic_write_text
-from drfkit.util.paths import named_result, results_dir, results_root
+from drfkit.util.paths import results_dir
 from drfkit.util.registry import Registry
 
 COLUMNS = ["id", "protocol", "claim", "paper", "ours", "rule", "verdict"]
@@ -77,15 +76,11 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def evidence_links(cid: str, prefix: str = "", folder: Path | None = None) -> str:
+def evidence_links(cid: str, prefix: str = "") -> str:
     """'notebook §section; tables …; figures …' of a claim, as markdown links relative to ``prefix``
-    (the folder of results/<profile>/ as seen from the page); with ``folder`` (results/<profile>/), each
-    file under the name it has there (``named_result``)."""
+    (the folder of results/<profile>/ as seen from the page)."""
     c = CLAIMS[cid]
     notebook, section, tables, figures = c.notebook, c.section, c.tables, c.figures
-    if folder is not None:
-        tables = [named_result(folder / "tables", Path(t).stem, Path(t).suffix).name for t in tables]
-        figures = [named_result(folder / "figures", Path(f).stem, Path(f).suffix).name for f in figures]
     parts = [f"[{notebook} §{section}]({prefix}executed/{notebook}.ipynb)"]
     parts += [f"[{t}]({prefix}tables/{t})" for t in tables] + [f"[{f}]({prefix}figures/{f})" for f in figures]
     return "; ".join(parts)
@@ -142,7 +137,7 @@ def to_markdown(table: pd.DataFrame, profile: str) -> str:
         cid = str(r["id"])
         if cid in CLAIMS and CLAIMS[cid].simulated:
             cells[5] += " (simulated source)"
-        cells.append(evidence_links(cid, folder=results_root() / profile) if cid in CLAIMS else "")
+        cells.append(evidence_links(cid) if cid in CLAIMS else "")
         lines.append("| " + " | ".join(cells) + " |")
     missing = [f"{cid} ({c.source})" for cid, c in CLAIMS.items() if cid not in set(table["id"])]  # any protocol
     if missing:
