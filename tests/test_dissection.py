@@ -103,6 +103,20 @@ def test_filter_pass_measures_errors_against_the_truth_and_decodes_dropout_off()
     assert trace["p_prior"].shape == (3, 7) and trace["gain"].shape == (3, 8)
 
 
+def test_filter_pass_in_float64_is_the_same_pass_on_a_copy():
+    """The clamped-gain intervention runs in float64 (a diverging transition's P outgrows float32 beside
+    r = R_CLAMP): the same numbers as float32 up to rounding, and the model itself stays float32."""
+    model = paper_drf()
+    w, r = model.observe(images(t=10))
+    w, r = w.detach(), dis.override_r(r.detach(), dis.clamp_frames((3, 10, 4), 4, 8), 4)
+    truth, targets = w[..., :4] + 0.1, np.zeros((3, 10, 2))
+    single = dis.filter_pass(model, w, r, truth, targets)
+    double = dis.filter_pass(model, w, r, truth, targets, float64=True)
+    assert next(model.parameters()).dtype == torch.float32 and w.dtype == torch.float32
+    assert np.allclose(single["abs_err"], double["abs_err"], atol=1e-5)
+    assert np.allclose(single["gain"], double["gain"], atol=1e-5) and double["gain"][:, 4:8].max() < 1e-4
+
+
 def test_level_bins_keep_pure_noise_apart():
     bins = dis.level_bins(np.array([[0.0, 0.049, 0.05, 0.51, 1.0]]))
     assert bins[0, :4].tolist() == [0, 0, 1, 10] and bins[0, 4] > 1000

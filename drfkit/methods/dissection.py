@@ -30,6 +30,7 @@ Shapes: N sequences, T frames, k observed dims, n state dims (w and r are (N, T,
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -65,12 +66,15 @@ def override_r(r: torch.Tensor, r_new: np.ndarray | torch.Tensor, k: int) -> tor
 
 
 def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, targets: np.ndarray,
-                batch_size: int = 200, q_scale: float = 1.0, log_var: np.ndarray | None = None
-                ) -> dict[str, np.ndarray]:
+                batch_size: int = 200, q_scale: float = 1.0, log_var: np.ndarray | None = None,
+                float64: bool = False) -> dict[str, np.ndarray]:
     """The filter on observations w, r (N, T, n), its q times ``q_scale``, against ``truth`` (N, T, k)
     (``model.observed_truth``); ``log_var`` (N, T, v): the output decoded with these belief log variances
     in place of the filter's own (``model.with_belief_variance``; an intervened filter decoded with the
-    variance input its decoder knows).
+    variance input its decoder knows). ``float64``: the pass on a float64 copy of the model (the model
+    itself is untouched): a transition that diverges while the gain is clamped grows P past what float32
+    keeps positive definite next to r = R_CLAMP, and the measurement is how far it diverges, not where
+    float32 gives out.
 
     Returns per frame, on the observed block, as sums over its k dims (so ratios of means are ratios
     of traces): 'r' (N, T); 'obs_err2' (N, T) = ||w - x||^2 and 'obs_err2_dims' (N, T, k);
@@ -81,6 +85,9 @@ def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, ta
     k = model.observed_dims
     if truth.shape != (*w.shape[:2], k):
         raise ValueError(f"truth must be (N, T, k) = {(*w.shape[:2], k)}, got {tuple(truth.shape)}")
+    if float64:
+        model = copy.deepcopy(model).double()
+        w, r, truth = w.double(), r.double(), truth.double()
     was_training = model.training
     model.eval()
     parts: dict[str, list[np.ndarray]] = {}

@@ -42,7 +42,8 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", 
 
     Returns (calibration, interventions). calibration: one row per (model, seed, set, level bin) of
     ``dissection.calibration_table``, set in {'train', 'ood', 'blackout'}. interventions: one row per
-    filter (model, seed): mae_train, mae_ood, mae_blackout as the model is; mae_blackout_clamped (a);
+    filter (model, seed): mae_train, mae_ood, mae_blackout as the model is; mae_blackout_clamped (a), in
+    float64 (a diverging transition outgrows float32's covariance);
     mae_ood_fitted_r and mae_ood_oracle_r (b), the fit's slope b (mean over dims); mae_ood_oracle_r_q (c)
     with q_scale chosen on the fit split (e2_over_p_fit its prior calibration there); no_dynamics' mae_ood
     (mean over its seeds, NaN without one) and the verdict of ``dissection.failure_verdict``."""
@@ -73,7 +74,7 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", 
         clamped = dis.override_r(r, dis.clamp_frames((*r.shape[:2], k), start, stop), k)
         held = dis.held_variance(traces["blackout"][3]["log_var"], start, stop)
         row["mae_blackout_clamped"] = float(dis.filter_pass(model, w, clamped, truth, sets["blackout"]["targets"],
-                                                            log_var=held)["abs_err"][:, start:stop].mean())
+                                                            log_var=held, float64=True)["abs_err"][:, start:stop].mean())
         fw, fr, ftruth = _prepared(model, fit_set)
         fit_trace = dis.filter_pass(model, fw, fr, ftruth, fit_set["targets"])
         log_a, b = dis.fit_log_linear_r(fit_trace["obs_err2_dims"], fit_set["noise"], max_level=train_level)
