@@ -235,6 +235,28 @@ def test_keep_outputs_copies_outputs_only_of_unchanged_code_cells(tmp_path):
     assert build_notebooks.keep_outputs(changed, target) == 1 and changed.cells[1].outputs == []
 
 
+def test_sync_markdown_gives_an_executed_notebook_the_sources_prose_and_refuses_a_code_change(tmp_path):
+    import nbformat
+    import pytest
+
+    sys.path.insert(0, str(REPO_ROOT / "tools"))
+    import build_notebooks
+
+    text = "# %% [markdown]\n# Why\n\n# %%\nx = 1\nx\n"
+    executed = build_notebooks.parse(text, "00_data_prep")
+    executed.cells.insert(0, nbformat.v4.new_code_cell("x = 0", metadata={"tags": ["injected-parameters"]}))
+    executed.cells[2].outputs = [nbformat.v4.new_output("execute_result", {"text/plain": "1"}, execution_count=1)]
+    target = tmp_path / "nb.ipynb"
+    nbformat.write(executed, target)
+    assert build_notebooks.sync_markdown(build_notebooks.parse(text.replace("# Why", "# Why, said better"),
+                                                               "00_data_prep"), target) == 1
+    synced = nbformat.read(target, as_version=4)
+    assert synced.cells[1].source == "Why, said better" and synced.cells[2].outputs[0]["data"]["text/plain"] == "1"
+    assert synced.cells[0].source == "x = 0"
+    with pytest.raises(ValueError, match="rerun the notebook"):
+        build_notebooks.sync_markdown(build_notebooks.parse(text.replace("x = 1", "x = 3"), "00_data_prep"), target)
+
+
 def test_keep_outputs_lets_the_parameters_cell_change_only_its_comments(tmp_path):
     import nbformat
 

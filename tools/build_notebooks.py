@@ -101,6 +101,32 @@ def keep_outputs(new: nbformat.NotebookNode, target: Path) -> int:
     return missing
 
 
+def _code_sources(nb: nbformat.NotebookNode) -> list[str]:
+    """The sources of the code cells, without a parameters cell (the pipeline's papermill injects its own)."""
+    skip = {"parameters", "injected-parameters"}
+    return [c.source for c in nb.cells if c.cell_type == "code" and not skip & set(c.metadata.get("tags", []))]
+
+
+def sync_markdown(new: nbformat.NotebookNode, target: Path) -> int:
+    """Give the executed notebook ``target`` (a profile's ``results/<profile>/executed/``) the markdown cells of
+    ``new``, in order, its code cells and outputs untouched; returns how many markdown cells changed. For a
+    prose edit made after a profile's run, which changes no number. Raises ValueError when the two differ in
+    anything but their markdown (the count of markdown cells, or a code cell's source): that needs a rerun."""
+    old = nbformat.read(target, as_version=4)
+    old_md = [c for c in old.cells if c.cell_type == "markdown"]
+    new_md = [c for c in new.cells if c.cell_type == "markdown"]
+    if len(old_md) != len(new_md) or _code_sources(old) != _code_sources(new):
+        raise ValueError(f"{target}: its code or the number of its markdown cells differs from the source's; "
+                         "rerun the notebook (make reproduce) instead of syncing its prose")
+    changed = 0
+    for cell, source in zip(old_md, new_md):
+        if cell.source != source.source:
+            cell.source, changed = source.source, changed + 1
+    if changed:
+        nbformat.write(old, target)
+    return changed
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("names", nargs="*", help="source stems to build (default: all)")
@@ -108,10 +134,24 @@ def main() -> int:
     ap.add_argument("--keep-outputs", action="store_true",
                     help="keep the stored outputs of code cells whose source is unchanged (after markdown edits); "
                          "fails if a code cell changed, which needs --execute")
+    ap.add_argument("--sync-markdown", metavar="FOLDER", type=Path,
+                    help="give the executed notebooks in FOLDER (results/<profile>/executed) the sources' markdown "
+                         "cells, outputs untouched; fails where a code cell differs (that needs a rerun)")
     args = ap.parse_args()
     sources = sorted(SRC.glob("*.py"))
     if args.names:
         sources = [s for s in sources if any(s.stem.startswith(n) for n in args.names)]
+    if args.sync_markdown:
+        for src in sources:
+            target = args.sync_markdown / f"{src.stem}.ipynb"
+            if target.exists():
+                try:
+                    changed = sync_markdown(parse(src.read_text(), src.stem), target)
+                except ValueError as exc:
+                    print(exc, file=sys.stderr)
+                    return 1
+                print(f"{target}: {changed} markdown cell(s) synced", flush=True)
+        return 0
     for src in sources:
         target = OUT / f"{src.stem}.ipynb"
         nb = parse(src.read_text(), src.stem)
