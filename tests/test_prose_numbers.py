@@ -15,10 +15,14 @@ def _table(name):
     return pd.read_csv(TABLES / name)
 
 
-def _book(model, column):
-    """Seed mean of a book-protocol row of the paper-scale protocol table (test data)."""
+def _mean(protocol, model, column):
+    """Seed mean of a row of the paper-scale protocol table (test data)."""
     t = _table("pendulum_protocols.csv")
-    return float(t.loc[(t["protocol"] == "book") & (t["model"] == model), column].mean())
+    return float(t.loc[(t["protocol"] == protocol) & (t["model"] == model), column].mean())
+
+
+def _book(model, column):
+    return _mean("book", model, column)
 
 
 def _ablation(variant, column):
@@ -37,7 +41,7 @@ QUOTES = [
     ("docs/dynamics.md", r"within 1.2 × no_dynamics'\*\*: met \([0-9.]+ against ([0-9.]+)\)",
      lambda: _book("no_dynamics", "mae_0.5"), 4),
     ("docs/dynamics.md", r"paper's recipe left it there too but 3.5 times higher \(([0-9.]+), the paper",
-     lambda: float(_table("pendulum_protocols.csv").query("protocol == 'paper' and model == 'drf'")["mae_0.5"].mean()), 4),
+     lambda: _mean("paper", "drf", "mae_0.5"), 4),
     ("docs/dynamics.md", r"slightly\s+better than no_dynamics \(([0-9.]+) against", lambda: _book("drf", "mae_0.75"), 3),
     ("docs/dynamics.md", r"worse than the LSTM \(([0-9.]+)\)", lambda: _book("lstm", "mae_0.75"), 3),
     ("docs/dynamics.md", r"through the blackout it is at\s+chance \(([0-9.]+)\)", lambda: _book("drf", "mae_blackout"), 2),
@@ -102,9 +106,8 @@ def dissection_lines(t: pd.DataFrame) -> list[str]:
         g = g.sort_values("seed")
         verdicts = g["failure"].unique()
         assert len(verdicts) == 1, f"{protocol} {model}: the seeds' verdicts differ ({verdicts}); say so in the docs"
-        digits = 2
         lines.append(f"* {protocol} protocol, `{model}`: **{verdicts[0]}**. Clamped-gain blackout MAE "
-                     + ", ".join(f"{v:.{digits}f}" for v in g["mae_blackout_clamped"])
+                     + ", ".join(f"{v:.2f}" for v in g["mae_blackout_clamped"])
                      + "; at 0.75 as it is " + ", ".join(f"{v:.3f}" for v in g["mae_ood"])
                      + ", with the oracle r " + ", ".join(f"{v:.3f}" for v in g["mae_ood_oracle_r"]) + ".")
     return lines
@@ -148,9 +151,13 @@ def _readme():
     return (REPO_ROOT / "README.md").read_text()
 
 
+def _claim(claim, protocol, column):
+    t = pd.read_csv(REPO_ROOT / "results" / "paper" / "claims.csv").set_index(["id", "protocol"])
+    return t.loc[(claim, protocol), column]
+
+
 def _verdict(claim, protocol):
-    t = pd.read_csv(REPO_ROOT / "results" / "paper" / "claims.csv")
-    return t.loc[(t["id"] == claim) & (t["protocol"] == protocol), "verdict"].iloc[0]
+    return _claim(claim, protocol, "verdict")
 
 
 # (a phrase of the README's conclusions, the claim rows whose verdicts it states; whitespace as one space)
@@ -182,20 +189,14 @@ def test_the_readmes_conclusions_state_the_committed_verdicts(phrase, rows):
         assert _verdict(claim, protocol) == verdict, (claim, protocol)
 
 
-def _protocol_mean(protocol, model, column):
-    t = _table("pendulum_protocols.csv")
-    return float(t.loc[(t["protocol"] == protocol) & (t["model"] == model), column].mean())
-
-
 def _claim_text(claim, protocol):
-    t = pd.read_csv(REPO_ROOT / "results" / "paper" / "claims.csv").set_index(["id", "protocol"])
-    return t.loc[(claim, protocol), "ours"]
+    return _claim(claim, protocol, "ours")
 
 
 def test_the_readmes_orderings_are_the_tables():
     """Each ordering or comparison the README's conclusions state, against the table it comes from."""
     text = _flat(_readme())
-    paper, book = (lambda m, c: _protocol_mean("paper", m, c)), (lambda m, c: _protocol_mean("book", m, c))
+    paper, book = (lambda m, c: _mean("paper", m, c)), _book
     # paper protocol: "its accuracy ties no_dynamics' in distribution and trails the LSTM's at 0.75"
     assert "ties no_dynamics' in distribution and trails the LSTM's at 0.75" in text
     assert abs(paper("drf", "mae_0.5") / paper("no_dynamics", "mae_0.5") - 1) < 0.1
@@ -229,7 +230,7 @@ def test_the_readmes_orderings_are_the_tables():
     # "even in distribution the book protocol's learned models are about twice the per-frame Bayes estimate,
     # the paper protocol's eight to ten times"
     limit = _table("pendulum_pixel_limit.csv").query("estimator == 'per_frame_bayes'").set_index("noise")["mae"]
-    bayes = float(limit["0.5"] if "0.5" in limit.index else limit[0.5])
+    bayes = float(limit["0.5"])   # the noise column holds levels and names ('clean', 'blackout'): read as text
     ratios = means / bayes
     assert ratios["book"].between(1.8, 2.6).all() and ratios["paper"].between(7.5, 10.5).all()
     assert "the book protocol's learned models are about twice the per-frame Bayes estimate, the paper " \
