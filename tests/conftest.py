@@ -27,3 +27,17 @@ def load_tool():
         return module
 
     return load
+
+
+@pytest.fixture
+def dynamics_profile(tmp_path, monkeypatch):
+    """``dynamics_profile("quick")``: notebook 02's parameters of a profile (what the ablation and the regime map
+    read: the data seed, the device); with ``tmp=True`` its results (and data cache) under ``tmp_path``."""
+    from drfkit.study.params import for_notebook, load_profile
+
+    def make(profile: str = "quick", tmp: bool = True):
+        if tmp:
+            monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
+        return for_notebook("02_pendulum_dynamics", load_profile(profile))
+
+    return make

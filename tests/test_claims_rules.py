@@ -232,6 +232,10 @@ def test_f1_uses_the_sign_of_rho():
     # t-interval of the rhos themselves would be -0.41 [-1.13, +0.31]
     assert "-0.44 [-0.87, +0.38]" in row["ours"]
     assert f1(0.79, 0.9, 2.6)["verdict"] == claims.NOT  # positive but nothing met
+    # the book protocol's seeds at paper scale: a positive mean whose interval reaches 0 is not "r rises"
+    spread = f1([0.30, -0.25, 0.07], 0.98, 29.2)["ours"]
+    assert "in the seed mean only: its interval reaches 0" in spread and "too loosely" not in spread
+    assert "r rises with the noise, too loosely" in f1([0.70, 0.72, 0.71], 0.97, 2.6)["ours"]
 
 
 def test_f1_a_pass_through_gain_is_never_partly():

@@ -131,12 +131,13 @@ def test_the_readme_conclusions_quote_no_hand_typed_ratio():
 
 def test_the_round2_table_in_docs_is_the_rows_on_disk():
     """docs/dynamics.md quotes the second and third rounds' summaries; regenerate each with
-    `python -m drfkit ablation --budget fit --out results/paper/ablation --summary --markdown --round N`."""
+    `python -m drfkit ablation --profile paper --budget fit --summary --markdown --round N`."""
     from drfkit.study import ablation
     from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, summarise_ablation
+    from drfkit.study.params import for_notebook, load_profile
 
     text = (REPO_ROOT / "docs" / "dynamics.md").read_text()
-    rows = ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation")
+    rows = ablation.ablation_table(for_notebook("02_pendulum_dynamics", load_profile("paper")), "fit")
     for tag, variants in (("round2", ROUND2_VARIANTS), ("round3", ROUND3_VARIANTS)):
         if f"<!-- {tag}:start -->" not in text:
             assert tag == "round3"   # the third round's table enters docs once its rows are committed

@@ -96,31 +96,34 @@ def test_protocol_table_joins_the_three_measurements():
     assert (table["protocol"] == "book").all()
 
 
-def test_ablation_row_is_trained_once_and_reused(tmp_path):
-    row = ablation.run_variant("book", 0, "tiny", tmp_path, progress=False)
+def test_ablation_row_is_trained_once_and_reused(tmp_path, dynamics_profile):
+    from drfkit.util.paths import data_dir
+
+    P = dynamics_profile("quick")
+    row = ablation.run_variant(P, "book", 0, "tiny", tmp_path, progress=False)
     assert row["variant"] == "book" and row["kind"] == "drf" and 0 < row["mae_0.5"] < 2
     for key in ("mae_0.75", "mae_1", "mae_blackout", "r_noise_spearman", "gain_ratio_blackout", "prior_ratio"):
         assert key in row
     path = tmp_path / "tiny" / "book-seed0.json"
     stamp = path.stat().st_mtime_ns
-    assert ablation.run_variant("book", 0, "tiny", tmp_path, progress=False) == json.loads(path.read_text())
+    assert ablation.run_variant(P, "book", 0, "tiny", tmp_path, progress=False) == json.loads(path.read_text())
     assert path.stat().st_mtime_ns == stamp
-    assert not list(tmp_path.glob("data/*test*"))   # the ablation never builds a test split
-    ablation.run_variant("no_dynamics_book", 0, "tiny", tmp_path, progress=False)
-    table = ablation.ablation_table("tiny", tmp_path)
+    assert list(data_dir(P.profile).glob("*val*")) and not list(data_dir(P.profile).glob("*test*"))  # never a test split
+    ablation.run_variant(P, "no_dynamics_book", 0, "tiny", tmp_path, progress=False)
+    table = ablation.ablation_table(P, "tiny", tmp_path)
     assert set(table["variant"]) == {"book", "no_dynamics_book"} and "mae_per_frame_blackout" not in table
     summary = summarise_ablation(table)
     assert list(summary.columns[:2]) == ["variant", "kind"] and (summary["n_seeds"] == 1).all()
-    assert cli(["ablation", "--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
+    assert cli(["ablation", "--profile", "quick", "--budget", "tiny", "--out", str(tmp_path), "--summary"]) == 0
     assert table["current"].all() and summary["current"].all()
     # a row the present code would train differently (older frames, another schedule) is kept but marked
     stale = tmp_path / "tiny" / "no_dynamics_book-seed0.json"
     stale.write_text(json.dumps(json.loads(stale.read_text()) | {"key": "former"}))
-    table = ablation.ablation_table("tiny", tmp_path).set_index("variant")
+    table = ablation.ablation_table(P, "tiny", tmp_path).set_index("variant")
     assert bool(table.loc["book", "current"]) and not bool(table.loc["no_dynamics_book", "current"])
     retired = tmp_path / "tiny" / "retired_variant-seed0.json"
     retired.write_text(json.dumps(json.loads(path.read_text()) | {"variant": "retired_variant"}))
-    assert not bool(ablation.ablation_table("tiny", tmp_path).set_index("variant").loc["retired_variant", "current"])
+    assert not bool(ablation.ablation_table(P, "tiny", tmp_path).set_index("variant").loc["retired_variant", "current"])
 
 
 def test_ablation_cli_rejects_unknown_variants(capsys):
@@ -128,15 +131,14 @@ def test_ablation_cli_rejects_unknown_variants(capsys):
     assert "unknown variant" in capsys.readouterr().err
 
 
-def test_the_third_rounds_choice_stays_an_ablation_row_and_the_book_trains_the_papers_drf():
+def test_the_third_rounds_choice_stays_an_ablation_row_and_the_book_trains_the_papers_drf(dynamics_profile):
     """The third round's rule (``ablation.mechanism_targets``: most of F1's and F2's targets met, then the
     lowest MAE at 0.75) still ranks the output-units DRF first on the committed validation rows, and the
     second round's its own choice; those stay ablation rows. The book protocol's DRF is the paper's
     architecture fit with the recipe that fits the mean and the wider encoder, as its baselines are."""
     from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, WIDE_ENCODER, variant_spec
-    from drfkit.util.paths import REPO_ROOT
 
-    rows = ablation.ablation_table("fit", REPO_ROOT / "results" / "paper" / "ablation")
+    rows = ablation.ablation_table(dynamics_profile("paper", tmp=False), "fit")
     round2 = ablation.mechanism_targets(ablation.summarise_ablation(rows[rows["variant"].isin(list(ROUND2_VARIANTS))]))
     assert round2.iloc[0]["variant"] == "fit_prior_split_book"
     summary = ablation.summarise_ablation(rows[rows["variant"].isin(list(ROUND3_VARIANTS))])
@@ -176,10 +178,10 @@ def test_the_pendulum_test_split_has_its_own_seed(tmp_path, monkeypatch):
         studies.pendulum_split(clash, "test")
 
 
-def test_the_variants_are_data_and_every_committed_ablation_row_is_still_current():
+def test_the_variants_are_data_and_every_committed_ablation_row_is_still_current(dynamics_profile):
     """params/protocols.yaml holds every variant; resolved, each names the same runs as before it moved there:
-    every committed row of the protocol ablation (whose key hashes its variant's spec) is current."""
-    from drfkit.util.paths import REPO_ROOT
+    every committed row of the protocol ablation (whose key is its run's ``run_key``) is current."""
+    P = dynamics_profile("paper", tmp=False)
 
     assert set(VARIANTS) >= {"paper", "fit_paper_wide", "fit_calibrated_prior_wide", "fit_known_dynamics_wide"}
     assert variant_spec("fit_prior_split_book")["train"] == FIT_THE_MEAN | {"prior_weight": 1.0}
@@ -187,9 +189,45 @@ def test_the_variants_are_data_and_every_committed_ablation_row_is_still_current
     # the fit budget's rows, and the small budget's that notebook 02 reads (its other rows were made on the first
     # generator's frames and were stale before the variants moved)
     for budget, variants in (("fit", list(VARIANTS)), ("small", ["paper", "book", "no_dynamics_book", "lstm_book"])):
-        table = ablation.ablation_table(budget, REPO_ROOT / "results" / "paper" / "ablation")
+        table = ablation.ablation_table(P, budget)
         known = table[table["variant"].isin(variants)]
         assert len(known) and known["current"].all(), known.loc[~known["current"], ["variant", "seed"]]
+
+
+def test_the_run_key_migration_moved_only_rows_that_were_current(dynamics_profile, load_tool):
+    """tools/migrate_run_keys.py moved the ablation's and the regime map's rows from the ablation's former key to
+    the one ``run_key``: every moved row's ``key_before`` is the former formula's key for it (it was current
+    before the move), and nothing is left to move; the stale rows (the first generator's frames) stayed stale."""
+    import json as _json
+
+    from drfkit.util.paths import results_dir
+
+    tool = load_tool("migrate_run_keys")
+    P = dynamics_profile("paper", tmp=False)
+    out = results_dir(P.profile, "ablation")
+    moved = [(p, _json.loads(p.read_text())) for p in sorted(out.glob("*/*.json"))]
+    moved = [(p, r) for p, r in moved if "key_before" in r]
+    assert len(moved) >= 88
+    for path, row in moved:
+        assert row["key_before"] == tool.legacy_key(row["variant"], int(row["seed"]), path.parent.name), path
+    counts = tool.migrate(P, out, write=False)
+    assert counts["migrated"] == 0 and counts["already"] >= 120, counts
+
+
+def test_the_ablation_trains_what_its_former_path_trained(dynamics_profile, load_tool):
+    """The ablation goes the studies' way (``variant_run``): for every variant at the test budget, the same
+    ``TrainConfig``, the same model (configuration and initial weights) and the same data as the former formula
+    (tools/migrate_run_keys.py's frozen copy); and one ``run_key`` names a profile's checkpoint and an ablation run."""
+    from drfkit.methods.run_config import run_key
+
+    tool = load_tool("migrate_run_keys")
+    P = dynamics_profile("quick")
+    assert tool.verify(P, ["fit_tiny"], None) == []
+    P1 = validate("01_pendulum_training", notebook_params("01_pendulum_training", load_profile("quick")))
+    stem = studies.checkpoint_stem(P1, "pendulum", "drf", 0, "book")
+    cfg = studies.model_config("pendulum", "drf", P1, "book")
+    train = studies.train_config(P1, "pendulum", "drf", 0, "book")
+    assert stem.name.endswith(run_key(cfg, train, studies.study_data_key(P1, "pendulum", "book")))
 
 
 @pytest.mark.parametrize("entry,message", [

@@ -28,13 +28,18 @@ def test_regime_variants_are_the_book_protocol_at_another_noise():
 
 @pytest.fixture(scope="module")
 def tiny_map(tmp_path_factory):
+    from drfkit.study.params import for_notebook, load_profile
+
     out = tmp_path_factory.mktemp("regime")
-    table = regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
-    return out, table
+    with pytest.MonkeyPatch.context() as mp:  # the data cache beside the rows, for the module's tests
+        mp.setenv("DRF_RESULTS", str(out))
+        P = for_notebook("02_pendulum_dynamics", load_profile("quick"))
+        table = regime.regime_map(P, [0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
+    return out, table, P
 
 
 def test_map_has_every_model_level_and_the_blackout(tiny_map):
-    _, table = tiny_map
+    _, table, _ = tiny_map
     assert set(table["model"]) == set(REGIME_BASES) | {"physics_reference"}
     for _, rows in table.groupby("model"):
         assert sorted(rows["test"]) == sorted([f"{lv:g}" for lv in LEVELS] + ["blackout", "after_blackout"])
@@ -43,30 +48,36 @@ def test_map_has_every_model_level_and_the_blackout(tiny_map):
 
 
 def test_rows_are_cached_and_recomputed_when_a_setting_changes(tiny_map, monkeypatch):
-    out, table = tiny_map
+    out, table, P = tiny_map
+    monkeypatch.setenv("DRF_RESULTS", str(out))
     files = sorted((out / "tiny" / "regime").glob("*.json"))
     assert len(files) == len(REGIME_BASES) + 1
-    assert list((out / "data").glob("pendulum-regime-test-*.npz"))  # its own test split, beside the ablation's
+    assert list((out / "quick" / "data").glob("pendulum-test-*.npz"))  # its own test split, beside the ablation's
 
     def no_training(*args, **kwargs):
         raise AssertionError("a cached regime row was trained again")
 
     monkeypatch.setattr(ablation, "train_variant", no_training)
-    again = regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
+    again = regime.regime_map(P, [0.5], [0], "tiny", out, LEVELS, n_test=3, n_samples=4, n_particles=30)
     assert again.equals(table)
     with pytest.raises(AssertionError, match="trained again"):  # another test size needs the models
-        regime.regime_map([0.5], [0], "tiny", out, LEVELS, n_test=2, n_samples=4, n_particles=30)
+        regime.regime_map(P, [0.5], [0], "tiny", out, LEVELS, n_test=2, n_samples=4, n_particles=30)
 
 
-def test_the_test_split_is_not_the_validation_split(tiny_map):
-    out, _ = tiny_map
-    test = regime._test_sets(out, ablation.BUDGETS["tiny"], [0.5], 3)[0.5]
-    val = ablation._split(ablation.data_dir(out), ablation.BUDGETS["tiny"], "val", 0.5)
+def test_the_test_split_is_not_the_validation_split(tiny_map, monkeypatch):
+    from drfkit.data.noise import Noise
+    from drfkit.study.pendulum_runs import load_split
+
+    out, _, P = tiny_map
+    monkeypatch.setenv("DRF_RESULTS", str(out))
+    test = regime._test_sets(P, "tiny", [0.5], 3)[0.5]
+    val = load_split(ablation.budget_splits(P, "tiny"), "val", Noise("rkn_uniform", 0.5))
     assert not np.allclose(test["targets"][:, 0], val["targets"][:3, 0])
+    assert ablation.test_seed(P) == P.pendulum.data_seed + 2 != P.pendulum.test_seed  # not the study's test split
 
 
 def test_summary_ratios_follow_the_rows(tiny_map):
-    _, table = tiny_map
+    _, table, _ = tiny_map
     summary = regime.regime_summary(table).set_index(["train_noise", "test"])
     row = summary.loc[(0.5, "0.5")]
     mae = table[(table["test"] == "0.5")].set_index("model")["mae"]
@@ -80,13 +91,13 @@ def test_the_figure_has_a_panel_per_training_noise_and_the_blackout(tiny_map):
     matplotlib.use("Agg")
     from drfkit.report.figures import plot_regime
 
-    _, table = tiny_map
+    _, table, _ = tiny_map
     fig = plot_regime(table, list(REGIME_BASES))
     assert len(fig.axes) == 2
 
 
 def test_reference_row_records_its_calibration(tiny_map):
-    out, _ = tiny_map
+    out, _, _ = tiny_map
     row = json.loads((out / "tiny" / "regime" / "physics_reference-train0.5-seed0.json").read_text())
     assert row["sigma_scale"] > 0 and 0 <= row["outlier"] < 1 and row["n_particles"] == 30
 
@@ -102,7 +113,7 @@ def test_the_paper_profile_finds_every_regime_row_committed(monkeypatch):
     profile's settings (a missing or stale row would make notebook 02 train for about an hour)."""
     from drfkit.study.params import for_notebook, load_profile
 
-    def refuse(name, seed, *args):
+    def refuse(P, name, seed, *args):
         raise AssertionError(f"the regime map would train {name} seed {seed}: commit its row "
                              f"(python -m drfkit regime --profile paper)")
 

@@ -60,29 +60,31 @@ def _known_variants(names: list[str]) -> bool:
 
 
 def screen(argv: list[str]) -> int:
-    """``python -m drfkit screen --budget fit --variants V --seeds 0 1 [--csv F]``: train (or load) the protocol
+    """``python -m drfkit screen --profile paper --budget fit --variants V --seeds 0 1 [--csv F]``: train (or load) the protocol
     ablation's runs of the variants and judge them by the screening rule on the validation split at the
     training noise only (``drfkit.study.dissection.screen_variants``); prints the table, writes it to --csv."""
     import torch
 
     from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS
     from drfkit.study.dissection import screen_variants
+    from drfkit.study.params import for_command
     from drfkit.util.io import atomic_write_csv
 
-    ap = parser("screen", "Judge variants by the calibrated-gain screen (validation at the training noise only).")
+    ap = parser("screen", "Judge variants by the calibrated-gain screen (validation at the training noise only).",
+                profile="paper")
     ap.add_argument("--budget", default="fit", choices=sorted(ABLATION_BUDGETS))
     ap.add_argument("--variants", nargs="+", required=True, help=f"from {sorted(VARIANTS)}")
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--out", default=None, help="the ablation's folder (default results/ablation)")
+    ap.add_argument("--out", default=None, help="the ablation's folder (default results/<profile>/ablation)")
     ap.add_argument("--csv", default=None, help="also write the table here")
     ap.add_argument("--per-seed", action="store_true",
                     help="one row per seed, with 'failed' (r does not follow the noise) and the failure rate")
     args = ap.parse_args(argv)
-    if not _known_variants(args.variants):
+    if not _known_variants(args.variants) or (P := for_command("02_pendulum_dynamics", args.profile)) is None:
         return 2
     torch.set_num_threads(args.threads)
-    table = screen_variants(args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed)
+    table = screen_variants(P, args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed)
     print(table.round(4).to_string(index=False))
     if args.per_seed:
         for variant, rows in table.groupby("variant", sort=False):
@@ -93,7 +95,7 @@ def screen(argv: list[str]) -> int:
 
 
 def ablation(argv: list[str]) -> int:
-    """``python -m drfkit ablation --budget fit --variants V --seeds 0 1``: train and judge protocol
+    """``python -m drfkit ablation --profile paper --budget fit --variants V --seeds 0 1``: train and judge protocol
     variants on validation data (``drfkit.study.ablation``; resumable), or with ``--summary`` print
     the finished rows' summary."""
     import time
@@ -102,19 +104,22 @@ def ablation(argv: list[str]) -> int:
 
     from drfkit.methods.protocols import ABLATION_BUDGETS, VARIANTS, summarise_ablation
     from drfkit.study.ablation import ROUNDS, ablation_table, run_variant, summary_markdown
+    from drfkit.study.params import for_command
 
-    ap = parser("ablation", "Train and judge protocol variants on validation data.")
+    ap = parser("ablation", "Train and judge protocol variants on validation data.", profile="paper")
     ap.add_argument("--budget", default="small", choices=sorted(ABLATION_BUDGETS))
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS), help=f"from {sorted(VARIANTS)}")
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--out", default=None, help="folder (default results/ablation)")
+    ap.add_argument("--out", default=None, help="folder (default results/<profile>/ablation)")
     ap.add_argument("--summary", action="store_true", help="print the finished rows' summary and train nothing")
     ap.add_argument("--markdown", action="store_true", help="with --summary: as the markdown table docs/ quote")
     ap.add_argument("--round", type=int, choices=sorted(ROUNDS), help="with --summary: that round's variants only")
     args = ap.parse_args(argv)
+    if (P := for_command("02_pendulum_dynamics", args.profile)) is None:
+        return 2
     if args.summary:
-        table = ablation_table(args.budget, args.out)
+        table = ablation_table(P, args.budget, args.out)
         if args.round is not None and len(table):
             table = table[table["variant"].isin(list(ROUNDS[args.round]))]
         summary = summarise_ablation(table)
@@ -126,7 +131,7 @@ def ablation(argv: list[str]) -> int:
     for name in args.variants:
         for seed in args.seeds:
             t0 = time.perf_counter()
-            row = run_variant(name, seed, args.budget, args.out)
+            row = run_variant(P, name, seed, args.budget, args.out)
             print(f"{name} seed {seed}: mae 0.5 {row['mae_0.5']:.4f}  0.75 {row['mae_0.75']:.4f}  "
                   f"blackout {row['mae_blackout']:.4f}  r~noise {row['r_noise_spearman']:.2f}  "
                   f"gain pure/clean {row.get('gain_ratio_blackout', float('nan')):.2f}  "

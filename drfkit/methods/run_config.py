@@ -97,5 +97,13 @@ def naming_fields(train_cfg: TrainConfig) -> dict[str, Any]:
     return {k: v for k, v in train_fields(train_cfg).items() if k != "patience"}
 
 
+def run_key(model_config: dict[str, Any], train_cfg: TrainConfig, data: dict[str, Any]) -> str:
+    """The one name of a training run (8 hex digits): its model's full configuration, the training fields that
+    name it (``naming_fields``) and what names its data (a study's ``data_key``). A profile's checkpoints
+    (``drfkit.study.studies.checkpoint_stem``), the ablation's and the regime map's rows all carry it, so two
+    recipes that train the same run share one name."""
+    return param_hash({"model": model_config, "train": naming_fields(train_cfg), "data": data}, 8)
+
+
 __all__ = ["LATER_FIELDS", "LR_SCHEDULES", "OBJECTIVES", "SELECTION_METRICS", "STOPPING_FIELDS", "TrainConfig",
-           "fingerprint", "naming_fields", "train_fields"]
+           "fingerprint", "naming_fields", "run_key", "train_fields"]

@@ -181,6 +181,21 @@ def finished_run(model_config: dict[str, Any], cfg: TrainConfig, checkpoint_stem
     return result
 
 
+def train_or_load(model_config: dict[str, Any], cfg: TrainConfig, checkpoint_stem: str | Path,
+                  data: Callable[[], tuple[SequenceData, SequenceData, Callable[[int], SequenceData] | None]], *,
+                  data_key: str = "", device: torch.device | str = "cpu", progress: bool = True,
+                  recipe: dict[str, Any] | None = None) -> TrainResult:
+    """The run of every experiment (a study's, the ablation's, the regime map's): a finished run read from its
+    files alone (``finished_run``), else ``train_model`` (which resumes) on ``data()`` = (train, val, fresh_train),
+    called only then, so that a finished run generates no data."""
+    result = finished_run(model_config, cfg, checkpoint_stem, data_key=data_key)
+    if result is not None:
+        return result
+    train, val, fresh = data()
+    return train_model(model_config, train, val, cfg, checkpoint_stem, data_key=data_key, device=device,
+                       progress=progress, fresh_train=fresh, recipe=recipe)
+
+
 def _restore_best(best_path: Path, last_path: Path, best: dict[str, Any] | None) -> None:
     """Make sure ``best_path`` holds a readable checkpoint, rewriting it from ``-last.pt``'s copy."""
     if best_path.exists():
@@ -389,5 +404,5 @@ def count_parameters(model) -> int:
     return int(sum(p.numel() for p in model.parameters()))
 
 
-__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "ResumeMismatchError", "train_model", "run_finished", "naming_fields",
+__all__ = ["SequenceData", "TrainConfig", "TrainResult", "NonFiniteLossError", "ResumeMismatchError", "train_model", "train_or_load", "run_finished", "naming_fields",
            "load_checkpoint", "load_latest", "selection_audit", "evaluate_loss", "evaluate_l1", "history_frame", "count_parameters"]

@@ -8,133 +8,140 @@ corruption) is trained on one small budget and judged on VALIDATION data only (t
     the mechanism diagnostics of ``drfkit.methods.diagnostics`` (r against noise at 0.75, gain on
     clean against pure-noise frames, one-step prediction, spectral radius of F_t).
 
-A run is ``train_model`` with its own checkpoints (resumable); its row is written
-atomically to ``<out>/<budget>/<variant>-seed<k>.json`` and reused while its fingerprint holds.
+A run goes the studies' way (``drfkit.study.pendulum_runs``): a budget is a ``PendulumSplits`` of the profile's
+data seed and a schedule, a variant is the spec a protocol would name, and the run is named by the one
+``run_key`` and trained by ``train_or_load`` (resumable). Its row is written atomically to
+``<out>/<budget>/<variant>-seed<k>.json`` and reused while its key holds.
 
-    python -m drfkit ablation --budget small --variants paper book --seeds 0 1 --threads 1
+    python -m drfkit ablation --profile paper --budget small --variants paper book --seeds 0 1 --threads 1
 """
 from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import torch
 
 from drfkit.data.noise import Noise
-from drfkit.data.pendulum import (GENERATOR_VERSION, blackout_frames, fresh_noise_seed, generate_pendulum, load_pendulum,
-                                  redraw_noise, with_blackout, with_random_blackouts)
+from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
 from drfkit.methods.diagnostics import blackout_summary, diagnose
-from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, TRAINING_BLACKOUT_SEED_OFFSET  # the profile's seed offsets: the same corruption
-from drfkit.util.io import atomic_write_json, param_hash
-from drfkit.util.paths import results_root
 from drfkit.methods.protocols import ABLATION_BUDGETS as BUDGETS
 from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS, VARIANTS, summarise_ablation, variant_spec
-from drfkit.methods.train import SequenceData, TrainConfig, load_checkpoint, train_model
-
-DATA_SEED = 1000  # the profiles' pend_data_seed: train = seed, val = seed + 1 (test, seed + 2, is never read)
+from drfkit.methods.run_config import TrainConfig, run_key
+from drfkit.methods.train import load_checkpoint, train_or_load
+from drfkit.models import default_config
+from drfkit.study.pendulum_runs import (PENDULUM, PROFILE_SCHEDULE, SPLIT_SEED_OFFSET, PendulumSplits, load_split,
+                                        variant_data, variant_data_key, variant_fresh_training, variant_train_config)
+from drfkit.util.device import pick_device
+from drfkit.util.io import atomic_write_json, param_hash
+from drfkit.util.paths import data_dir, results_dir
 
 EVAL_LEVELS = (0.5, 0.75, 1.0)
 ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS, 4: ROUND4_VARIANTS}
-# fresh trajectories (the encoder probe): seeds far from every split's (data seed + 0, 1, 2)
-FRESH_MOTION_SEED = 10_000_000
 
 
-def _split(cache: Path, budget: dict, split: str, level: float) -> dict:
-    n = budget["train_sequences"] if split == "train" else budget["val_sequences"]
-    seed = DATA_SEED + (0 if split == "train" else 1)
-    return load_pendulum(cache, f"ablation-{split}", n, budget["seq_len"], Noise("rkn_uniform", level), seed)
-
-
-def _as_data(arrays: dict) -> SequenceData:
-    return SequenceData(torch.from_numpy(arrays["images"]), torch.from_numpy(arrays["targets"]))
-
-
-def _run(name: str, seed: int, budget_name: str, out: str | Path | None) -> tuple[dict, dict, Path, str]:
-    """(budget, spec, budget folder, key) of one variant run; the key covers all that trains it."""
+def budget_splits(P, budget_name: str, train_max_noise: float = 0.5, test_sequences: int = 0) -> PendulumSplits:
+    """A budget's data: its sizes on the profile's ``pend_data_seed`` (train = seed, val = seed + 1) and data cache.
+    Its test split (the noise-regime map's, ``test_sequences`` long) keeps seed + 2, the split its rows were scored
+    on; the study's own test split moved to ``pend_test_seed``, never read here."""
     if budget_name not in BUDGETS:
         raise ValueError(f"unknown budget {budget_name!r}; choose from {sorted(BUDGETS)}")
-    budget, spec = BUDGETS[budget_name], variant_spec(name)
-    root = Path(out) if out is not None else results_root() / "ablation"
-    key_spec = {k: v for k, v in spec.items() if not (k == "train" and not v)}  # rows from before 'train' keep their key
-    key = param_hash({"budget": budget, "spec": key_spec, "seed": seed, "data_seed": DATA_SEED,
-                      "frames": GENERATOR_VERSION}, 8)
-    return budget, spec, root / budget_name, key
+    b = BUDGETS[budget_name]
+    return PendulumSplits(data_dir(P.profile), b["train_sequences"], b["val_sequences"], int(test_sequences),
+                          b["seq_len"], float(train_max_noise), int(P.pendulum.data_seed), test_seed(P))
 
 
-def data_dir(out: str | Path | None) -> Path:
-    """The data cache of an ablation folder (shared by every budget)."""
-    return (Path(out) if out is not None else results_root() / "ablation") / "data"
+def test_seed(P) -> int:
+    """The budgets' test split (the noise-regime map's): ``pend_data_seed + 2``."""
+    return int(P.pendulum.data_seed) + SPLIT_SEED_OFFSET["test"]
+test_seed.__test__ = False  # a seed, not a test for pytest to collect
 
 
-def train_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
+@dataclass(frozen=True)
+class VariantRun:
+    """One (variant, seed) at a budget, resolved as a study's run: its data, model, schedule and ``run_key``."""
+    name: str
+    seed: int
+    budget: str
+    spec: dict[str, Any]
+    splits: PendulumSplits
+    config: dict[str, Any]
+    train: TrainConfig
+    data_key: dict[str, Any]
+    key: str
+    folder: Path  # <out>/<budget>: the rows; the checkpoints under models/
+
+    @property
+    def stem(self) -> Path:
+        return self.folder / "models" / f"{self.name}-seed{self.seed}-{self.key}"
+
+    def noise(self, level: float | None = None) -> Noise:
+        return Noise("rkn_uniform", self.spec["train_max_noise"] if level is None else level)
+
+
+def variant_run(P, name: str, seed: int, budget_name: str = "small", out: str | Path | None = None) -> VariantRun:
+    """Resolve a variant at a budget: the budget's schedule, which a variant's recipe may override (the batch of
+    ``fit_the_mean``), on the budget's data at the variant's training noise."""
+    spec = variant_spec(name)
+    splits = budget_splits(P, budget_name, spec["train_max_noise"])
+    budget = BUDGETS[budget_name]
+    schedule = {k: budget[k] for k in PROFILE_SCHEDULE if k in budget} | {
+        k: v for k, v in spec["train"].items() if k in PROFILE_SCHEDULE}
+    config = default_config(spec["kind"], PENDULUM.input_kind, PENDULUM.out_dim, **spec["model"])
+    train = variant_train_config(schedule, spec, seed)
+    data_key = variant_data_key(splits, spec)
+    folder = (Path(out) if out is not None else results_dir(P.profile, "ablation")) / budget_name
+    return VariantRun(name, int(seed), budget_name, spec, splits, config, train, data_key,
+                      run_key(config, train, data_key), folder)
+
+
+def train_variant(P, name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
                   progress: bool = True):
-    """Train (or resume, or load when finished) one variant at one seed; returns (TrainResult, key)."""
-    budget, spec, folder, key = _run(name, seed, budget_name, out)
-    cache = data_dir(out)
-    noise = Noise("rkn_uniform", spec["train_max_noise"])
-    clean_train = _split(cache, budget, "train", spec["train_max_noise"])
-    train = clean_train
-    if spec["blackouts"]:
-        train = with_random_blackouts(train, spec["blackouts"]["fraction"], tuple(spec["blackouts"]["lengths"]),
-                                      seed=DATA_SEED + TRAINING_BLACKOUT_SEED_OFFSET)
-    val = _split(cache, budget, "val", spec["train_max_noise"])
-    config = {"kind": spec["kind"], "input_kind": "pendulum", "out_dim": 2, **spec["model"]}
-    cfg = train_config(budget, spec["train"], seed)
-    fresh = None
-    if spec["train"].get("fresh_motion"):
-        def fresh(epoch: int) -> SequenceData:  # new trajectories (and their noise) every epoch: unlimited frames
-            return _as_data(generate_pendulum(budget["train_sequences"], budget["seq_len"], noise,
-                                              FRESH_MOTION_SEED + fresh_noise_seed(DATA_SEED, epoch)))
-    elif spec["train"].get("fresh_noise"):
-        def fresh(epoch: int) -> SequenceData:  # the same clean frames, new noise (and blackouts) per epoch
-            return _as_data(redraw_noise(clean_train, noise, fresh_noise_seed(DATA_SEED, epoch), spec["blackouts"]))
-    res = train_model(config, _as_data(train), _as_data(val), cfg, folder / "models" / f"{name}-seed{seed}-{key}",
-                      data_key=key, progress=progress, fresh_train=fresh,
-                      recipe={"variant": name, "budget": budget_name, "train_max_noise": spec["train_max_noise"],
-                              "blackouts": spec["blackouts"], "fresh_noise": bool(spec["train"].get("fresh_noise")),
-                              "fresh_motion": bool(spec["train"].get("fresh_motion"))})
-    return res, key
+    """Train (or resume, or load when finished) one variant at one seed; returns (TrainResult, VariantRun)."""
+    run = variant_run(P, name, seed, budget_name, out)
+    spec, D = run.spec, run.splits
+
+    def data():
+        return (variant_data(D, "train", run.noise(), spec), variant_data(D, "val", run.noise(), spec),
+                variant_fresh_training(D, spec, run.noise()))
+
+    res = train_or_load(run.config, run.train, run.stem, data, data_key=param_hash(run.data_key),
+                        device=pick_device(P.device), progress=progress,
+                        recipe={"variant": name, "budget": budget_name, "train_max_noise": spec["train_max_noise"],
+                                "blackouts": spec["blackouts"], "fresh_noise": bool(spec["train"].get("fresh_noise")),
+                                "fresh_motion": bool(spec["train"].get("fresh_motion"))})
+    return res, run
 
 
-def train_config(budget: dict, overrides: dict, seed: int) -> TrainConfig:
-    """The budget's schedule with a variant's ``train`` overrides (``fresh_noise`` is the data's
-    business; ``mse_warmup: "half"`` means half the budget's epochs)."""
-    fields = {"epochs": budget["epochs"], "lr": budget["lr"], "batch_size": budget["batch_size"]}
-    fields |= {k: v for k, v in overrides.items() if k not in ("fresh_noise", "fresh_motion")}
-    if fields.get("mse_warmup") == "half":
-        fields["mse_warmup"] = fields["epochs"] // 2
-    return TrainConfig(seed=seed, **fields)
-
-
-def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
+def run_variant(P, name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
                 progress: bool = True) -> dict[str, Any]:
     """Train (or resume) one variant at one seed and return its validation row."""
-    budget, spec, folder, key = _run(name, seed, budget_name, out)
-    cache = data_dir(out)
-    row_path = folder / f"{name}-seed{seed}.json"
+    run = variant_run(P, name, seed, budget_name, out)
+    row_path = run.folder / f"{name}-seed{seed}.json"
     if row_path.exists():
         row = json.loads(row_path.read_text())
-        if row.get("key") == key:
+        if row.get("key") == run.key:
             return row
 
     t0 = time.perf_counter()
-    res, _ = train_variant(name, seed, budget_name, out, progress)
+    res, _ = train_variant(P, name, seed, budget_name, out, progress)
     seconds = time.perf_counter() - t0
     model = load_checkpoint(res.best_path)
 
-    row: dict[str, Any] = {"variant": name, "kind": spec["kind"], "seed": seed, "budget": budget_name, "key": key,
+    row: dict[str, Any] = {"variant": name, "kind": run.spec["kind"], "seed": seed, "budget": budget_name, "key": run.key,
                            "best_epoch": res.best_epoch, "best_val_loss": res.best_val_loss,
                            "train_seconds": seconds if not res.resumed_from else None}
     for level in EVAL_LEVELS:
-        summary, _ = diagnose(model, _split(cache, budget, "val", level))
+        summary, _ = diagnose(model, load_split(run.splits, "val", run.noise(level)))
         row[f"mae_{level:g}"] = summary.pop("mae")
         if level == 0.75:
             row.update(summary)
-    frames = blackout_frames(budget["seq_len"])
-    dark = with_blackout(_split(cache, budget, "val", 0.5), *frames, seed=DATA_SEED + BLACKOUT_SEED_OFFSET)
+    frames = blackout_frames(run.splits.seq_len)
+    dark = with_blackout(load_split(run.splits, "val", run.noise(0.5)), *frames,
+                         seed=run.splits.data_seed + BLACKOUT_SEED_OFFSET)
     summary, per_frame = diagnose(model, dark)
     row.update(blackout_summary(per_frame, frames))
     for field in ("gain_clean", "gain_pure", "gain_ratio"):
@@ -145,25 +152,25 @@ def run_variant(name: str, seed: int, budget_name: str = "small", out: str | Pat
     return row
 
 
-def _is_current(row: dict, budget_name: str, out: str | Path | None) -> bool:
+def _is_current(P, row: dict, budget_name: str) -> bool:
     """Whether a row was trained by what this code would train now (same variant, schedule, data
     seed and frames): rows kept from before a change (the former OpenCV frames, a retired
     variant) stay readable but are marked, never mistaken for a rerun."""
     try:
-        return row.get("key") == _run(row["variant"], int(row["seed"]), budget_name, out)[3]
+        return row.get("key") == variant_run(P, row["variant"], int(row["seed"]), budget_name).key
     except ValueError:  # a variant no longer defined
         return False
 
 
-def ablation_table(budget_name: str = "small", out: str | Path | None = None) -> pd.DataFrame:
+def ablation_table(P, budget_name: str = "small", out: str | Path | None = None) -> pd.DataFrame:
     """Every finished row of a budget, one per (variant, seed), without the per-frame curve;
     ``current`` is False for a row the present code would train differently (``_is_current``)."""
-    folder = (Path(out) if out is not None else results_root() / "ablation") / budget_name
+    folder = (Path(out) if out is not None else results_dir(P.profile, "ablation")) / budget_name
     rows = [json.loads(p.read_text()) for p in sorted(folder.glob("*-seed*.json"))]
     frame = pd.DataFrame(rows)
     if rows:
-        frame["current"] = [_is_current(r, budget_name, out) for r in rows]
-    return frame.drop(columns=["mae_per_frame_blackout", "key"], errors="ignore")
+        frame["current"] = [_is_current(P, r, budget_name) for r in rows]
+    return frame.drop(columns=["mae_per_frame_blackout", "key", "key_before"], errors="ignore")
 
 
 MARKDOWN_COLUMNS = {"variant": "variant", "kind": "model", "n_seeds": "seeds", "mae_0.5": "MAE 0.5",

@@ -108,7 +108,7 @@ SCREEN_MAE_TIE = 0.05
 FAILED_SEED_SPEARMAN = 0.5
 
 
-def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5,
+def screen_variants(P, variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5,
                     per_seed: bool = False) -> pd.DataFrame:
     """The calibrated-gain screen on VALIDATION data at the training noise only (levels <= ``train_level``;
     never 0.75 or a blackout): per trained (variant, seed) of the protocol ablation (``drfkit.study.ablation``,
@@ -119,13 +119,13 @@ def screen_variants(variants, seeds, budget_name: str = "fit", out=None, train_l
     r does not follow the noise, the known-dynamics filter's failure mode)."""
     from drfkit.methods.train import load_checkpoint
     from drfkit.study import ablation
+    from drfkit.study.pendulum_runs import load_split
 
     rows = []
     for variant in variants:
         for seed in seeds:
-            res, _ = ablation.train_variant(variant, seed, budget_name, out, progress=False)
-            budget, _, _, _ = ablation._run(variant, seed, budget_name, out)
-            val = ablation._split(ablation.data_dir(out), budget, "val", train_level)
+            res, run = ablation.train_variant(P, variant, seed, budget_name, out, progress=False)
+            val = load_split(run.splits, "val", run.noise(train_level))
             model = load_checkpoint(res.best_path)
             w, r, truth = _prepared(model, val)
             trace = dis.filter_pass(model, w, r, truth, val["targets"])

@@ -24,8 +24,8 @@ from drfkit.data.noise import Noise
 from drfkit.util.io import atomic_write_csv, param_hash
 from drfkit.util.paths import models_dir, tables_dir
 from drfkit.util.device import pick_device
-from drfkit.methods.train import (SequenceData, TrainConfig, TrainResult, finished_run, history_frame, naming_fields,
-                                  train_model)
+from drfkit.methods.run_config import run_key
+from drfkit.methods.train import SequenceData, TrainConfig, TrainResult, history_frame, naming_fields, train_or_load
 # each study's data, as notebooks ask for it
 from drfkit.study.pedestrian_runs import pedestrian_data, pedestrian_records, pedestrian_split, target_statistics
 from drfkit.study.pendulum_runs import SPLIT_SEED_OFFSET, pendulum_data, pendulum_split, split_seed
@@ -87,9 +87,7 @@ def checkpoint_stem(P, study: str, kind: str, seed: int, protocol: str = "paper"
     train = train_config(P, study, kind, seed, protocol)
     if training_seed is not None:
         train = dataclasses.replace(train, seed=int(training_seed))
-    key = param_hash({"model": cfg, "train": naming_fields(train),
-                      "data": study_data_key(P, study, protocol)}, 8)
-    return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{key}"
+    return models_dir(P.profile) / f"{study}-{kind}-seed{seed}-{run_key(cfg, train, study_data_key(P, study, protocol))}"
 
 
 def shared_run(P, study: str, kind: str, seed: int, protocol: str, other: str) -> bool:
@@ -123,24 +121,21 @@ def train_models(P, study: str, progress: bool = True, kinds: list[str] | None =
     key = study_data_key(P, study, protocol)
     data_key = param_hash(key)
     recipe = {"study": study, "protocol": protocol, **key}
-    data: dict[str, Any] = {}
+    data: list = []
 
-    def splits():  # generated only when a run must train: a finished run loads from its files alone
+    def splits():  # generated once, only when a run must train: a finished run loads from its files alone
         if not data:
-            data.update(train=study_data(P, study, "train", None, protocol), val=study_data(P, study, "val", None, protocol),
-                        fresh=fresh_training(P, study, protocol))
-        return data
+            data.extend([study_data(P, study, "train", None, protocol), study_data(P, study, "val", None, protocol),
+                         fresh_training(P, study, protocol)])
+        return tuple(data)
 
     results, curves = {}, []
     for kind in kinds or study_models(P, study, protocol):
         for seed in seeds or P.seeds:
             config, cfg = model_config(study, kind, P, protocol, options), train_config(P, study, kind, seed, protocol)
             stem = checkpoint_stem(P, study, kind, seed, protocol, options)
-            res = finished_run(config, cfg, stem, data_key=data_key)
-            if res is None:
-                d = splits()
-                res = train_model(config, d["train"], d["val"], cfg, stem, data_key=data_key, device=device,
-                                  progress=progress, fresh_train=d["fresh"], recipe=recipe)
+            res = train_or_load(config, cfg, stem, splits, data_key=data_key, device=device, progress=progress,
+                                recipe=recipe)
             results[(kind, seed)] = res
             curve = history_frame(res.history)
             curve.insert(0, "seed", seed)

@@ -250,8 +250,9 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 # blackout — with the same mechanism checks as above. The baselines are trained under the same
 # protocols, so a gain that any sequence model would get shows up in theirs too. Every variant
 # tried stays in the table. Rows are cached under `results/<profile>/ablation/`; the command
-# behind them: `python -m drfkit ablation --budget <ablation_budget> --out results/<profile>/ablation
-# --variants ... --seeds ...` (one thread per run; two such processes on two cores). This notebook
+# behind them: `python -m drfkit ablation --profile <profile> --budget <ablation_budget>
+# --variants ... --seeds ...` (one thread per run; two such processes on two cores). A run is named and
+# trained as a profile's runs are (docs/architecture.md, "One experiment path"), on the profile's data seed. This notebook
 # trains the rows `ablation_variants` × `ablation_seeds` that are missing and shows every finished row
 # of the budget (in the paper profile, the single levers were run at seed 0 by that command).
 
@@ -260,9 +261,9 @@ dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round
 from drfkit.study import ablation
 from drfkit.util.paths import results_dir
 
-rows = [ablation.run_variant(v, s, P.dynamics.ablation.budget, results_dir(P.profile, "ablation"), progress=False)
+rows = [ablation.run_variant(P, v, s, P.dynamics.ablation.budget, progress=False)
         for v in P.dynamics.ablation.variants for s in P.dynamics.ablation.seeds]
-table = ablation.ablation_table(P.dynamics.ablation.budget, results_dir(P.profile, "ablation"))  # every finished row
+table = ablation.ablation_table(P, P.dynamics.ablation.budget)  # every finished row
 save_table(P.profile, "pendulum_ablation", table)
 ablation.summarise_ablation(table)
 
@@ -298,14 +299,14 @@ assert required <= set(zip(table["variant"], table["seed"])) and table["mae_0.5"
 # three filter levers: a split decoder (the mean from z alone, σ from P alone, as the RKN's), a loss on
 # the one-step prior z_{t|t−1} as well as the posterior (so the transition must predict), and a
 # constant learned Q. Data: the benchmark's own frames, validation split only. Rows are cached under
-# `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit ablation --budget
-# fit --out results/<profile>/ablation --variants ... --seeds 0 1 --threads 1`.
+# `results/<profile>/ablation/<ablation_round2_budget>/`; command: `python -m drfkit ablation --profile <profile>
+# --budget fit --variants ... --seeds 0 1 --threads 1`.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-round2_rows = [ablation.run_variant(v, s, P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"), progress=False)
+round2_rows = [ablation.run_variant(P, v, s, P.dynamics.ablation.round2.budget, progress=False)
                for v in P.dynamics.ablation.round2.variants for s in P.dynamics.ablation.round2.seeds]
-round2 = ablation.ablation_table(P.dynamics.ablation.round2.budget, results_dir(P.profile, "ablation"))
+round2 = ablation.ablation_table(P, P.dynamics.ablation.round2.budget)
 save_table(P.profile, "pendulum_ablation_round2", round2)
 round2_summary = ablation.summarise_ablation(round2)
 round2_summary
@@ -348,14 +349,14 @@ ablation.mechanism_targets(round2_summary, min_seeds=min(2, len(P.dynamics.ablat
 # one scale). It splits the distance to the limit into what the encoder loses and what a learned
 # transition loses on top. Beside them, the **encoder probe**: no_dynamics fit on new trajectories every
 # epoch (unlimited frames, cheap since frames are gathered from the rod bank), with a wider encoder
-# (32 channels, 128 features), and both. Command: `python -m drfkit ablation --budget fit --out
-# results/<profile>/ablation --variants <ablation_round3_variants> --seeds 0 1 --threads 1`.
+# (32 channels, 128 features), and both. Command: `python -m drfkit ablation --profile <profile> --budget fit
+# --variants <ablation_round3_variants> --seeds 0 1 --threads 1`.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-round3_rows = [ablation.run_variant(v, s, P.dynamics.ablation.round3.budget, results_dir(P.profile, "ablation"), progress=False)
+round3_rows = [ablation.run_variant(P, v, s, P.dynamics.ablation.round3.budget, progress=False)
                for v in P.dynamics.ablation.round3.variants for s in P.dynamics.ablation.round3.seeds]
-round3 = ablation.ablation_table(P.dynamics.ablation.round3.budget, results_dir(P.profile, "ablation"))
+round3 = ablation.ablation_table(P, P.dynamics.ablation.round3.budget)
 round3 = round3[round3["variant"].isin(P.dynamics.ablation.round3.variants)]
 save_table(P.profile, "pendulum_ablation_round3", round3)
 round3_summary = ablation.summarise_ablation(round3)

@@ -30,6 +30,8 @@ def f1_filter_mechanism(mechanism: pd.DataFrame, noise: float) -> dict[str, Any]
     verdict = REPRODUCED if all(checks) else NOT if reversed_ or pass_through or not any(checks) else PARTLY
     direction = ("r falls as frames get noisier: the opposite of following their quality" if rho[0] < 0 else
                  "r does not rise with the noise" if reversed_ else
+                 # a positive mean whose interval reaches 0: the seeds do not agree that r rises at all
+                 "r rises with the noise in the seed mean only: its interval reaches 0" if rho[1] <= 0 else
                  "r rises with the noise" + ("" if checks[0] else ", too loosely to order frames by quality"))
     return {"id": "F1", "claim": "The DRF's filter filters: r follows frame quality, the gain drops on pure noise, "
                                  "F predicts the next observation",
