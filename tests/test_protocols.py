@@ -248,3 +248,34 @@ def test_a_bad_recipe_file_is_refused_with_what_to_fix(tmp_path, entry, message)
         load_variants(path)
     with pytest.raises(FileNotFoundError, match="restore it from git"):
         load_variants(tmp_path / "missing.yaml")
+
+
+def test_a_local_checkpoint_of_the_former_path_is_moved_not_retrained(tmp_path, dynamics_profile, load_tool,
+                                                                       monkeypatch):
+    """tools/migrate_run_keys.py's ``migrate_checkpoints``: a run stored under the former stem and fingerprint (as
+    the ablation wrote them) is renamed and re-fingerprinted, and then found finished by ``train_variant``."""
+    from drfkit.methods import train as train_module
+    from drfkit.methods.run_config import fingerprint
+    from drfkit.util.io import atomic_torch_save, torch_load_checked
+
+    tool = load_tool("migrate_run_keys")
+    P = dynamics_profile("quick")
+    res, run = ablation.train_variant(P, "book", 0, "tiny", tmp_path, progress=False)
+    legacy = tool.legacy_key("book", 0, "tiny")
+    former_fp = fingerprint(tool.legacy_model_config(run.spec), run.train, legacy)
+    old_stem = run.folder / "models" / f"book-seed0-{legacy}"
+    best, last = torch_load_checked(res.best_path), torch_load_checked(res.last_path)
+    best = best | {"config": tool.legacy_model_config(run.spec), "meta": best["meta"] | {"fingerprint": former_fp, "data": legacy}}
+    atomic_torch_save(f"{old_stem}-best.pt", best)
+    atomic_torch_save(f"{old_stem}-last.pt", last | {"fingerprint": former_fp, "best": best})
+    res.best_path.unlink()
+    res.last_path.unlink()
+    assert tool.migrate_checkpoints(P, tmp_path, write=True) == {"moved": 1, "skipped": 0}
+    assert not list((run.folder / "models").glob(f"*{legacy}*"))
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a moved checkpoint was trained again")
+
+    monkeypatch.setattr(train_module, "train_model", no_training)
+    again, _ = ablation.train_variant(P, "book", 0, "tiny", tmp_path, progress=False)
+    assert again.best_epoch == res.best_epoch and again.best_path == res.best_path

@@ -11,7 +11,10 @@ legacy formula's for it (it was current before the move); its old key stays in `
 tests/test_protocols.py can check the migration. Rows that were stale stay stale.
 
     python tools/migrate_run_keys.py --profile paper --verify      # check only
-    python tools/migrate_run_keys.py --profile paper --write       # rewrite the rows' keys
+    python tools/migrate_run_keys.py --profile paper --write       # rewrite the rows' keys, move local checkpoints
+
+The ablation's checkpoints are not committed; those trained before the move are renamed to their new stem and their
+fingerprint rewritten (``migrate_checkpoints``), so that they are found instead of retrained.
 """
 from __future__ import annotations
 
@@ -162,6 +165,47 @@ def migrate(P, out: Path, write: bool) -> dict[str, int]:
     return counts
 
 
+def migrate_checkpoints(P, out: Path, write: bool) -> dict[str, int]:
+    """Rename the ablation's local checkpoints (not committed) to their run's new stem and rewrite their
+    fingerprint, so that a run trained before the move is found, resumed or extended instead of retrained. Only a
+    run whose stem carries the legacy key and whose stored configuration the new path resolves is moved."""
+    import re
+
+    from drfkit.methods.run_config import fingerprint
+    from drfkit.models import build_model
+    from drfkit.study import ablation
+    from drfkit.util.io import atomic_torch_save, torch_load_checked
+
+    counts = {"moved": 0, "skipped": 0}
+    for last_path in sorted(out.glob("*/models/*-last.pt")):
+        budget_name = last_path.parent.parent.name
+        match = re.fullmatch(r"(.+)-seed(\d+)-([0-9a-f]{8})-last\.pt", last_path.name)
+        if budget_name not in ABLATION_BUDGETS or match is None or match.group(1) not in VARIANTS:
+            counts["skipped"] += 1
+            continue
+        name, seed, key = match.group(1), int(match.group(2)), match.group(3)
+        run = ablation.variant_run(P, name, seed, budget_name, out)
+        best_path = Path(str(last_path).replace("-last.pt", "-best.pt"))
+        last = torch_load_checked(last_path)
+        best = torch_load_checked(best_path) if best_path.exists() else last.get("best")
+        if key != legacy_key(name, seed, budget_name) or best is None or \
+                build_model(best["config"]).config != run.config or TrainConfig(**best["meta"]["train"]) != run.train:
+            counts["skipped"] += 1
+            continue
+        counts["moved"] += 1
+        if not write:
+            continue
+        fp, data = fingerprint(run.config, run.train, param_hash(run.data_key)), param_hash(run.data_key)
+        best = best | {"meta": best["meta"] | {"fingerprint": fp, "data": data}}
+        last = last | {"fingerprint": fp, "best": None if last.get("best") is None else best}
+        atomic_torch_save(Path(f"{run.stem}-best.pt"), best)
+        atomic_torch_save(Path(f"{run.stem}-last.pt"), last)
+        for old in (best_path, last_path):
+            if old.exists() and old != Path(f"{run.stem}-{old.name.rsplit('-', 1)[1]}"):
+                old.unlink()
+    return counts
+
+
 def main(argv: list[str] | None = None) -> int:
     from drfkit.study.params import for_notebook, load_profile
     from drfkit.util.paths import results_dir
@@ -169,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--profile", default="paper")
     ap.add_argument("--verify", action="store_true", help="check that the new path trains what the legacy one did")
-    ap.add_argument("--write", action="store_true", help="rewrite the rows' keys (default: count only)")
+    ap.add_argument("--write", action="store_true",
+                    help="rewrite the rows' keys and move the local checkpoints (default: count only)")
     args = ap.parse_args(argv)
     P = for_notebook("02_pendulum_dynamics", load_profile(args.profile))
     out = results_dir(P.profile, "ablation")
@@ -180,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         if problems:
             return 1
     print(migrate(P, out, args.write))
+    print("local checkpoints:", migrate_checkpoints(P, out, args.write))
     return 0
 
 
