@@ -183,8 +183,10 @@ def test_schema_types_are_python_types():
 
 
 def test_missing_profile_lists_known_ones():
-    with pytest.raises(ParameterError, match="known profiles"):
+    with pytest.raises(ParameterError, match=r"known profiles: \['paper', 'quick'\]"):
         load_profile("no_such_profile")
+    with pytest.raises(ParameterError, match="holds the training recipes .*, not a profile"):
+        load_profile("protocols")
 
 
 @pytest.mark.slow

@@ -270,8 +270,9 @@ def test_a_local_checkpoint_of_the_former_path_is_moved_not_retrained(tmp_path, 
     atomic_torch_save(f"{old_stem}-last.pt", last | {"fingerprint": former_fp, "best": best})
     res.best_path.unlink()
     res.last_path.unlink()
-    assert tool.migrate_checkpoints(P, tmp_path, write=True) == {"moved": 1, "skipped": 0}
+    assert tool.migrate_checkpoints(P, tmp_path, write=True) == {"moved": 1, "already": 0, "skipped": 0}
     assert not list((run.folder / "models").glob(f"*{legacy}*"))
+    assert tool.migrate_checkpoints(P, tmp_path, write=False) == {"moved": 0, "already": 1, "skipped": 0}
 
     def no_training(*args, **kwargs):
         raise AssertionError("a moved checkpoint was trained again")

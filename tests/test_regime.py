@@ -73,7 +73,7 @@ def test_the_test_split_is_not_the_validation_split(tiny_map, monkeypatch):
     test = regime._test_sets(P, "tiny", [0.5], 3)[0.5]
     val = load_split(ablation.budget_splits(P, "tiny"), "val", Noise("rkn_uniform", 0.5))
     assert not np.allclose(test["targets"][:, 0], val["targets"][:3, 0])
-    assert ablation.test_seed(P) == P.pendulum.data_seed + 2 != P.pendulum.test_seed  # not the study's test split
+    assert ablation.regime_test_seed(P) == P.pendulum.data_seed + 2 != P.pendulum.test_seed  # not the study's test split
 
 
 def test_summary_ratios_follow_the_rows(tiny_map):

@@ -176,7 +176,7 @@ def migrate_checkpoints(P, out: Path, write: bool) -> dict[str, int]:
     from drfkit.study import ablation
     from drfkit.util.io import atomic_torch_save, torch_load_checked
 
-    counts = {"moved": 0, "skipped": 0}
+    counts = {"moved": 0, "already": 0, "skipped": 0}
     for last_path in sorted(out.glob("*/models/*-last.pt")):
         budget_name = last_path.parent.parent.name
         match = re.fullmatch(r"(.+)-seed(\d+)-([0-9a-f]{8})-last\.pt", last_path.name)
@@ -185,6 +185,9 @@ def migrate_checkpoints(P, out: Path, write: bool) -> dict[str, int]:
             continue
         name, seed, key = match.group(1), int(match.group(2)), match.group(3)
         run = ablation.variant_run(P, name, seed, budget_name, out)
+        if key == run.key:
+            counts["already"] += 1
+            continue
         best_path = Path(str(last_path).replace("-last.pt", "-best.pt"))
         last = torch_load_checked(last_path)
         best = torch_load_checked(best_path) if best_path.exists() else last.get("best")

@@ -51,13 +51,12 @@ def budget_splits(P, budget_name: str, train_max_noise: float = 0.5, test_sequen
         raise ValueError(f"unknown budget {budget_name!r}; choose from {sorted(BUDGETS)}")
     b = BUDGETS[budget_name]
     return PendulumSplits(data_dir(P.profile), b["train_sequences"], b["val_sequences"], int(test_sequences),
-                          b["seq_len"], float(train_max_noise), int(P.pendulum.data_seed), test_seed(P))
+                          b["seq_len"], float(train_max_noise), int(P.pendulum.data_seed), regime_test_seed(P))
 
 
-def test_seed(P) -> int:
+def regime_test_seed(P) -> int:
     """The budgets' test split (the noise-regime map's): ``pend_data_seed + 2``."""
     return int(P.pendulum.data_seed) + SPLIT_SEED_OFFSET["test"]
-test_seed.__test__ = False  # a seed, not a test for pytest to collect
 
 
 @dataclass(frozen=True)
@@ -102,18 +101,21 @@ def train_variant(P, name: str, seed: int, budget_name: str = "small", out: str 
                   progress: bool = True):
     """Train (or resume, or load when finished) one variant at one seed; returns (TrainResult, VariantRun)."""
     run = variant_run(P, name, seed, budget_name, out)
+    return _train(P, run, progress), run
+
+
+def _train(P, run: VariantRun, progress: bool):
     spec, D = run.spec, run.splits
 
     def data():
         return (variant_data(D, "train", run.noise(), spec), variant_data(D, "val", run.noise(), spec),
                 variant_fresh_training(D, spec, run.noise()))
 
-    res = train_or_load(run.config, run.train, run.stem, data, data_key=param_hash(run.data_key),
-                        device=pick_device(P.device), progress=progress,
-                        recipe={"variant": name, "budget": budget_name, "train_max_noise": spec["train_max_noise"],
-                                "blackouts": spec["blackouts"], "fresh_noise": bool(spec["train"].get("fresh_noise")),
-                                "fresh_motion": bool(spec["train"].get("fresh_motion"))})
-    return res, run
+    return train_or_load(run.config, run.train, run.stem, data, data_key=param_hash(run.data_key),
+                         device=pick_device(P.device), progress=progress,
+                         recipe={"variant": run.name, "budget": run.budget, "train_max_noise": spec["train_max_noise"],
+                                 "blackouts": spec["blackouts"], "fresh_noise": bool(spec["train"].get("fresh_noise")),
+                                 "fresh_motion": bool(spec["train"].get("fresh_motion"))})
 
 
 def run_variant(P, name: str, seed: int, budget_name: str = "small", out: str | Path | None = None,
@@ -127,7 +129,7 @@ def run_variant(P, name: str, seed: int, budget_name: str = "small", out: str | 
             return row
 
     t0 = time.perf_counter()
-    res, _ = train_variant(P, name, seed, budget_name, out, progress)
+    res = _train(P, run, progress)
     seconds = time.perf_counter() - t0
     model = load_checkpoint(res.best_path)
 

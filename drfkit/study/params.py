@@ -259,6 +259,15 @@ def write_profile(path: str | Path, flat: dict[str, Any]) -> Path:
 BASE_KEY = "base"  # a profile's top-level key naming the profile it overrides
 
 
+# params/ also holds the recipes file, which is not a profile
+RECIPES_FILE = PARAMS_DIR / "protocols.yaml"
+
+
+def known_profiles() -> list[str]:
+    """The profiles in params/ (every YAML file there but the recipes file)."""
+    return sorted(p.stem for p in PARAMS_DIR.glob("*.yaml") if p.name != RECIPES_FILE.name)
+
+
 def _profile_path(profile: str | Path, relative_to: Path | None = None) -> Path:
     """``params/<name>.yaml`` for a name, else the YAML path itself (a relative one taken from
     ``relative_to``: the folder of the profile that names it as its base)."""
@@ -278,8 +287,11 @@ def load_profile(profile: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str
     it (``notebook_params``) see the merged profile. Unless it sets ``profile``, it is named after
     its file, so its results never land in the base's folder."""
     path = _profile_path(profile, _chain[-1].parent if _chain else None)
+    if path.resolve() == RECIPES_FILE.resolve():
+        raise ParameterError(f"{path} holds the training recipes and ablation variants (drfkit.methods.protocols), "
+                             f"not a profile; known profiles: {known_profiles()}")
     if not path.is_file():
-        known = sorted(p.stem for p in PARAMS_DIR.glob("*.yaml"))
+        known = known_profiles()
         named = f" (the base of {_chain[-1]})" if _chain else ""
         raise ParameterError(f"parameter file {path}{named} does not exist; known profiles: {known}")
     with open(path) as fh:

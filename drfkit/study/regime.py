@@ -54,7 +54,7 @@ def _test_sets(P, budget_name: str, levels: Iterable[float], n_test: int) -> dic
 def _settings(P, levels, n_test: int, n_samples: int, extra: dict | None = None) -> dict[str, Any]:
     # "point": the rows score the dropout-off pass (rows made from the MC mean carry no such field, so they are stale)
     return {"levels": [float(v) for v in levels], "n_test": int(n_test), "n_samples": int(n_samples),
-            "blackout_noise": BLACKOUT_NOISE, "test_seed": ablation.test_seed(P), "point": "dropout_off", **(extra or {})}
+            "blackout_noise": BLACKOUT_NOISE, "test_seed": ablation.regime_test_seed(P), "point": "dropout_off", **(extra or {})}
 
 
 def _cached(path: Path, key: str) -> dict | None:
@@ -66,8 +66,9 @@ def _cached(path: Path, key: str) -> dict | None:
 
 
 def _model(P, name: str, seed: int, budget_name: str, out, progress: bool):
-    res, _ = ablation.train_variant(P, name, seed, budget_name, out, progress)
-    return load_checkpoint(res.best_path)
+    """(model, ``ablation.VariantRun``) of a variant's trained run (trained if missing)."""
+    res, run = ablation.train_variant(P, name, seed, budget_name, out, progress)
+    return load_checkpoint(res.best_path), run
 
 
 def _point_and_sigma(model, arrays, n_samples: int, seed: int, cache: Path | None) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +100,7 @@ def model_row(P, kind: str, train_noise: float, seed: int, budget_name: str, out
     key, path = model_key(P, kind, train_noise, seed, budget_name, out, levels, n_test, n_samples)
     if (row := _cached(path, key)) is not None:
         return row
-    model = _model(P, name, seed, budget_name, out, progress)
+    model, _ = _model(P, name, seed, budget_name, out, progress)
     row: dict[str, Any] = {"model": kind, "variant": name, "train_noise": float(train_noise), "seed": seed,
                            "budget": budget_name, "key": key, "mae": {}}
     for level, arrays in _test_sets(P, budget_name, levels, n_test).items():
@@ -122,8 +123,8 @@ def reference_row(P, train_noise: float, seed: int, budget_name: str, out, level
     key, path = reference_key(P, train_noise, seed, budget_name, out, levels, n_test, n_samples, n_particles)
     if (row := _cached(path, key)) is not None:
         return row
-    model = _model(P, name, seed, budget_name, out, progress)
-    val = load_split(ablation.variant_run(P, name, seed, budget_name, out).splits, "val", Noise("rkn_uniform", train_noise))
+    model, run = _model(P, name, seed, budget_name, out, progress)
+    val = load_split(run.splits, "val", run.noise(train_noise))
     table, curves = reference_on(lambda arrays: _point_and_sigma(model, arrays, n_samples, seed, cache), val,
                                  _test_sets(P, budget_name, levels, n_test), n_particles, seed)
     sweep = table[table["noise"] != "blackout"]
