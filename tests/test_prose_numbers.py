@@ -175,7 +175,7 @@ README_VERDICTS = [
     ("(C7a partly)", [("C7a", "paper", "partly")]),
     ("under the book's even a perfect gate gains under a point", [("C7a", "book", "not testable")]),
     ("(C7b reproduced)", [("C7b", "paper", "reproduced"), ("C7b", "book", "reproduced")]),
-    ("inside the paper's band (C6 reproduced)", [("C6", "paper", "reproduced")]),
+    ("at the paper's band's edge (C6 partly; reproduced in other runs)", [("C6", "paper", "partly")]),
 ]
 
 
@@ -241,9 +241,10 @@ def test_the_readmes_orderings_are_the_tables():
     share = float(re.search(r"coverage [+-][0-9.]+ pt, ([0-9]+)% of the paper's", c7a).group(1)) / 100
     low = float(re.search(r"KG - random [+-][0-9.]+ pt \[([+-][0-9.]+),", c7a).group(1))
     assert 0.1 <= share <= 0.3 and low <= 0 and "by a fifth of the paper's effect, an interval that reaches zero" in text
-    # "the DRF's uncertainty is about 3.3x cheaper than Monoloco's, inside the paper's band (C6 reproduced)"
+    # "the DRF's uncertainty is about 3.5x cheaper than Monoloco's, at the paper's band's edge (C6 partly; ...)":
+    # above the band, but within a tenth of its edge (docs/results_history.md lists the runs on both sides)
     c6 = float(re.match(r"([0-9.]+)x at batch 1", _claim_text("C6", "paper")).group(1))
-    assert "about 3.3x cheaper than Monoloco's" in text and round(c6, 1) == 3.3 and 2.93 * 0.85 <= c6 <= 2.93 * 1.15
+    assert "about 3.5x cheaper than Monoloco's" in text and round(c6, 1) == 3.5 and 2.93 * 1.15 < c6 < 2.93 * 1.15 * 1.1
     # "on the pedestrians the gain captures almost none of a perfect gate's gain"
     for protocol in ("paper", "book"):
         kg_share = float(re.search(r"KG's share of the oracle's gain ([+-]?[0-9.]+)", _claim_text("C7b", protocol)).group(1))
