@@ -1,6 +1,8 @@
 """The dissection of a filter (drfkit.methods.dissection) and the calibrated-gain DRF, on cases with known
-answers: a diagonal filter's gain is P/(P + r), a clamped r stops the update, the r fits recover a known law,
-the calibration ratios of a known trace, the decision rule on each side of its thresholds."""
+answers: a diagonal filter's gain is P/(P + r); a forced gain of 0 is read back as exactly 0 and the state follows
+F alone, even where F expands 8x per frame; the open-loop error of a rotating linear system with a known
+transition error; the oracle gain of known errors; the calibration ratios of a known trace; the verdict rule on
+each side of its thresholds."""
 from __future__ import annotations
 
 import math
@@ -40,20 +42,6 @@ def test_an_untrained_drf_is_diagonal_so_its_gain_is_the_prior_over_prior_plus_r
     assert torch.all(out["q"] > 0) and torch.all(out["p_prior"] > out["q"])
 
 
-def test_a_clamped_r_stops_the_update_and_the_state_coasts():
-    model = paper_drf()
-    w, r = model.observe(images(t=10))
-    clamp = dis.clamp_frames((*r.shape[:2], 4), 4, 8)
-    r_new = dis.override_r(r, clamp, 4)
-    assert torch.all(r_new[:, 4:8] == dis.R_CLAMP) and torch.equal(r_new[:, :4], r[:, :4])
-    with torch.no_grad():
-        out = model.filter_internals(w, r_new)
-    z = out["h"][..., :4]
-    assert out["gain"][:, 4:8].max() < 1e-4
-    assert torch.allclose(z[:, 4:8], z[:, 3:4].expand(-1, 4, -1), atol=1e-3)  # F = I: the state stays put
-    assert out["gain"][:, 8].min() > 0.3                                      # and the next frame is read again
-
-
 def test_q_scale_scales_q_and_the_prior_variance():
     model = paper_drf()
     w, r = model.observe(images())
@@ -64,15 +52,135 @@ def test_q_scale_scales_q_and_the_prior_variance():
     assert torch.all(tenth["p_prior"][:, 0] < one["p_prior"][:, 0]) and torch.all(tenth["gain"][:, 1] < one["gain"][:, 1])
 
 
-def test_override_r_keeps_nan_entries_and_names_a_wrong_shape():
-    r = torch.ones(2, 3, 5)
-    new = np.full((2, 3, 2), np.nan)
-    new[0, 1] = 7.0
-    out = dis.override_r(r, new, 2)
-    assert out[0, 1, :2].tolist() == [7.0, 7.0] and out[0, 1, 2:].tolist() == [1.0] * 3
-    assert float(out.sum()) == 30 + 2 * 6.0
-    with pytest.raises(ValueError, match=r"\(N, T, k\)"):
-        dis.override_r(r, np.ones((2, 3, 5)), 2)
+def expanding_drf(radius=8.0, latent=4):
+    """A DRF whose transition is F = radius * I on every frame (the basis transition with every matrix set)."""
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2, latent=latent, transition_kind="basis")).eval()
+    with torch.no_grad():
+        model.transition.basis.copy_(radius * torch.eye(latent).expand_as(model.transition.basis))
+    return model
+
+
+def test_a_forced_zero_gain_reads_back_as_exactly_zero_over_15_frames_where_f_expands_8x():
+    model = expanding_drf()
+    w, r = (t.detach() for t in model.observe(images(t=20)))
+    gain = dis.forced_gain((3, 20), 3, 18)
+    with torch.no_grad():
+        tr = model.double().filter_steps(w.double(), r.double(), return_gains=True, return_prior=True, gain=gain)
+    model.float()
+    assert torch.all(tr["gains"][:, 3:18] == 0)                                   # the whole K, exactly
+    z = tr["z"]
+    for h in range(1, 16):                                                        # z = F^h z, nothing read
+        assert torch.allclose(z[:, 2 + h], 8.0 ** h * z[:, 2], rtol=1e-9)
+    assert torch.equal(tr["p_diag"][:, 3:18], tr["p_prior"][:, 2:17].double())    # P = F P F^T + Q, no update
+    assert torch.all(tr["gains"][:, 18].diagonal(dim1=-2, dim2=-1) > 0.99)        # the next frame is read again
+    truth = w[..., :4]
+    trace = dis.filter_pass(model, w, r, truth, np.zeros((3, 20, 2)), float64=True, gain=gain)
+    assert dis.check_clamped(trace, gain) == 0.0 and next(model.parameters()).dtype == torch.float32
+
+
+def test_a_large_r_is_no_clamp_where_f_expands():
+    """What the former intervention did (r = 1e6 on the gap): P grows 64x a frame until P / (P + r) reads the
+    frames again, so the 'clamped' filter is not; ``check_clamped`` would refuse such a trace."""
+    model = expanding_drf()
+    w, r = (t.detach().double() for t in model.observe(images(t=20)))
+    r[:, 3:18] = 1e6
+    with torch.no_grad():
+        tr = model.double().filter_steps(w, r, return_gains=True)
+    assert tr["gains"][:, 17].diagonal(dim1=-2, dim2=-1).min() > 0.5
+    fake = {"gain_abs_max": tr["gains"].diagonal(dim1=-2, dim2=-1).abs().amax(-1).numpy()}
+    with pytest.raises(ValueError, match="did not skip"):
+        dis.check_clamped(fake, dis.forced_gain((3, 20), 3, 18))
+
+
+def test_forced_gain_names_a_span_that_touches_the_start():
+    assert torch.isnan(dis.forced_gain((2, 6), 1, 3)[:, [0, 3, 4, 5]]).all()
+    with pytest.raises(ValueError, match="frame 0"):
+        dis.forced_gain((2, 6), 0, 3)
+
+
+def test_the_known_dynamics_filter_clamped_follows_the_pendulum_alone():
+    from drfkit.models.known_dynamics import pendulum_step
+
+    torch.manual_seed(0)
+    model = build_model(default_config("known_dynamics", "pendulum", 2)).eval()
+    w, r = (t.detach() for t in model.observe(images(t=12)))
+    gain = dis.forced_gain((3, 12), 4, 12)
+    with torch.no_grad():
+        tr = model.filter_steps(w, r, return_gains=True, gain=gain.float())
+        internals = model.filter_internals(w, r, gain=gain.float())
+    assert torch.all(tr["gains"][:, 4:] == 0) and torch.all(internals["gain"][:, 4:] == 0)
+    x = tr["x"]
+    for t in range(4, 12):
+        theta, omega, _ = pendulum_step(x[:, t - 1, 0], x[:, t - 1, 1])
+        assert torch.allclose(x[:, t], torch.stack([theta, omega], -1), atol=1e-6)
+
+
+def rotating_case(model_step: float, true_step: float = 0.2, t: int = 25, start: int = 5):
+    """A 2-d DRF in the output's units (readout identity) whose transition rotates by ``model_step`` per frame,
+    fed exact observations of a point rotating by ``true_step``, its gain clamped on [start, start + 15)."""
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2, latent=2, transition_kind="basis", readout="identity",
+                                       noise_head="log")).eval()
+    c, s = math.cos(model_step), math.sin(model_step)
+    with torch.no_grad():
+        model.transition.basis.copy_(torch.tensor([[c, -s], [s, c]]).expand_as(model.transition.basis))
+        model.transition.log_q.fill_(math.log(1e-6))
+    theta = true_step * np.arange(t)[None].repeat(2, 0) + np.array([[0.0], [1.0]])
+    targets = np.stack([np.cos(theta), np.sin(theta)], -1)
+    w = torch.from_numpy(targets)
+    r = torch.full_like(w, 1e-12)                     # exact observations: the posterior is the truth
+    gain = dis.forced_gain((2, t), start, start + dis.HORIZON)
+    trace = dis.filter_pass(model, w, r, w, targets, float64=True, gain=gain)
+    return trace, targets, theta, start
+
+
+def test_the_open_loop_error_of_a_rotating_system_is_its_known_answer():
+    trace, targets, theta, start = rotating_case(model_step=0.25)
+    h = np.arange(1, dis.HORIZON + 1)
+    last = theta[:, start - 1:start]                                                # (2, 1): the last read angle
+    expected = np.abs(np.stack([np.cos(last + 0.25 * h), np.sin(last + 0.25 * h)], -1) - targets[:, start:start + 15])
+    clamped = dis.per_horizon(trace["abs_err"], start)
+    assert clamped == pytest.approx(expected.mean(-1).mean(0), abs=1e-6)
+    angle = dis.per_horizon(dis.angle_error(trace["mean"], targets), start)
+    assert angle == pytest.approx(np.minimum(0.05 * h, 2 * np.pi - 0.05 * h), abs=1e-6)  # 0.05 rad per frame
+    held = dis.per_horizon(np.abs(dis.hold(targets, start, start + 15) - targets).mean(-1), start)
+    H = dis.open_loop_horizon(clamped, held)
+    ok = (clamped < held) & (clamped <= dis.OPEN_LOOP_MAX)
+    assert 0 < H < dis.HORIZON and ok[:H].all() and not ok[H]
+    exact, *_ = rotating_case(model_step=0.2)
+    assert dis.open_loop_horizon(dis.per_horizon(exact["abs_err"], start), held) == dis.HORIZON
+
+
+def test_open_loop_horizon_and_the_verdicts_on_each_side_of_their_edges():
+    held = np.array([0.1, 0.2, 0.3, 0.4])
+    assert dis.open_loop_horizon(np.array([0.05, 0.1, 0.09, 0.01]), held) == 4   # 0.10 itself still predicts
+    assert dis.open_loop_horizon(np.array([0.05, 0.1001, 0.0, 0.0]), held) == 1  # above 0.10 it fails
+    assert dis.open_loop_horizon(np.array([0.1, 0.0, 0.0, 0.0]), held) == 0      # equal to hold is not below it
+    assert dis.open_loop_horizon(np.array([0.0, 0.0, 0.0, 0.0]), held) == 4
+    assert dis.horizon_verdicts([0.1, 0.3, 0.3, 0.2], [0.2, 0.3, 0.2, 0.25], [0.5, 0.3, 0.5, 0.1]) == [
+        "gain", "transition", "filtering", "gain"]
+
+
+def test_the_oracle_gain_weighs_the_prior_and_the_observation_by_their_errors():
+    noise = np.array([[0.0, 0.1, 0.1, 1.0, 1.0]] * 2)
+    prior_err2 = np.array([[1.0, 1.0, 4.0, 4.0]] * 2)
+    obs_err2 = np.array([[1.0, 1.0, 100.0, 100.0]] * 2)
+    rows = {r["level_lo"]: r for r in dis.oracle_gain_table(prior_err2, obs_err2, noise)}
+    assert rows[0.1]["gain"] == pytest.approx(0.5) and rows[1.0]["gain"] == pytest.approx(4 / 104)
+    gain = dis.oracle_gain(noise, list(rows.values()))
+    assert torch.isnan(gain[:, 0]).all() and gain[0, 1:].tolist() == pytest.approx([0.5, 0.5, 4 / 104, 4 / 104])
+
+
+def test_the_oracle_gain_of_an_ideal_observation_is_the_observation():
+    """K* = 1 where the observation is exact and the prior is not: the forced update returns w."""
+    trace, targets, _, _ = rotating_case(model_step=0.25)
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2, latent=2, transition_kind="basis", readout="identity",
+                                       noise_head="log")).eval()
+    w = torch.from_numpy(targets).float()
+    out = dis.filter_pass(model, w, torch.full_like(w, 1e-3), w, targets, gain=torch.ones(2, 25))
+    assert np.abs(out["mean"] - targets).max() < 1e-6
 
 
 def test_known_dynamics_internals_live_in_the_observation_space():
@@ -103,20 +211,6 @@ def test_filter_pass_measures_errors_against_the_truth_and_decodes_dropout_off()
     assert trace["p_prior"].shape == (3, 7) and trace["gain"].shape == (3, 8)
 
 
-def test_filter_pass_in_float64_is_the_same_pass_on_a_copy():
-    """The clamped-gain intervention runs in float64 (a diverging transition's P outgrows float32 beside
-    r = R_CLAMP): the same numbers as float32 up to rounding, and the model itself stays float32."""
-    model = paper_drf()
-    w, r = model.observe(images(t=10))
-    w, r = w.detach(), dis.override_r(r.detach(), dis.clamp_frames((3, 10, 4), 4, 8), 4)
-    truth, targets = w[..., :4] + 0.1, np.zeros((3, 10, 2))
-    single = dis.filter_pass(model, w, r, truth, targets)
-    double = dis.filter_pass(model, w, r, truth, targets, float64=True)
-    assert next(model.parameters()).dtype == torch.float32 and w.dtype == torch.float32
-    assert np.allclose(single["abs_err"], double["abs_err"], atol=1e-5)
-    assert np.allclose(single["gain"], double["gain"], atol=1e-5) and double["gain"][:, 4:8].max() < 1e-4
-
-
 def test_level_bins_keep_pure_noise_apart():
     bins = dis.level_bins(np.array([[0.0, 0.049, 0.05, 0.51, 1.0]]))
     assert bins[0, :4].tolist() == [0, 0, 1, 10] and bins[0, 4] > 1000
@@ -133,54 +227,6 @@ def test_calibration_ratios_of_a_known_trace():
     assert rows[0.0]["frames"] == n  # t >= 1 only: frame 0 has no prior
     assert rows[0.2]["err2_over_r"] == pytest.approx(1.0) and rows[1.0]["err2_over_r"] == pytest.approx(100.0)
     assert rows[0.2]["e2_over_p"] == pytest.approx(0.25)
-
-
-def test_the_log_linear_fit_recovers_a_known_law_and_extrapolates():
-    rng = np.random.default_rng(0)
-    noise = rng.uniform(0, 1.0, size=(400, 50))
-    law = np.exp(np.log(0.01) + np.array([4.0, 6.0]) * noise[..., None])           # (N, T, 2)
-    err2 = law * rng.chisquare(1, size=law.shape)
-    log_a, b = dis.fit_log_linear_r(err2, noise, max_level=0.5)
-    assert b == pytest.approx([4.0, 6.0], abs=0.3) and np.exp(log_a) == pytest.approx([0.01, 0.01], rel=0.15)
-    r = dis.r_from_fit(noise, log_a, b)
-    high = noise > 0.9
-    assert np.median(r[high] / law[high]) == pytest.approx(1.0, abs=0.35)  # beyond the fitted levels too
-    oracle = dis.r_from_levels(err2, noise)
-    assert np.median(oracle[high] / law[high]) == pytest.approx(1.0, abs=0.2)
-    with pytest.raises(ValueError, match="two bins"):
-        dis.fit_log_linear_r(err2, np.full_like(noise, 0.01), max_level=0.5)
-
-
-def test_r_scale_is_the_error_over_r_per_dim():
-    trace = {"obs_err2_dims": np.stack([np.full((2, 3), 1.0), np.full((2, 3), 8.0)], -1)}
-    r = torch.stack([torch.full((2, 3), 4.0), torch.full((2, 3), 2.0), torch.full((2, 3), 9.0)], -1)
-    assert dis.r_scale(trace, r).tolist() == pytest.approx([0.25, 4.0])
-
-
-@pytest.mark.parametrize("clamped,oracle,oracle_q,expected", [
-    (0.10, 0.05, math.nan, "gain"),           # both on their boundary
-    (0.1001, 0.05, math.nan, "transition"),   # does not coast
-    (0.10, 0.0501, math.nan, "transition"),   # a competent r is not enough ...
-    (0.10, 0.0501, 0.05, "prior variance"),   # ... but with q calibrated it is
-    (0.11, 0.0501, 0.01, "transition"),       # q does not rescue a transition that cannot coast
-    (math.nan, 0.01, 0.01, "not measured"),
-])
-def test_the_failure_verdict_on_each_side_of_its_thresholds(clamped, oracle, oracle_q, expected):
-    assert dis.failure_verdict(clamped, oracle, 0.1, oracle_q) == expected
-
-
-def test_calibrate_q_scale_picks_the_scale_whose_prior_variance_matches_its_error():
-    model = paper_drf()
-    w, r = model.observe(images(b=4, t=10))
-    w, r = w.detach(), r.detach()
-    truth = w[..., :4].clone()
-    scale, ratio = dis.calibrate_q_scale(model, w, r, truth, np.zeros((4, 10, 2)))
-    ratios = {}
-    for s in dis.Q_SCALES:
-        t = dis.filter_pass(model, w, r, truth, np.zeros((4, 10, 2)), q_scale=s)
-        ratios[s] = t["prior_err2"].mean() / t["p_prior"].mean()
-    assert scale == min(ratios, key=lambda s: abs(math.log(ratios[s])))
-    assert ratio == pytest.approx(ratios[scale])
 
 
 # ------------------------------------------------------------------ the calibrated-gain DRF
@@ -286,3 +332,27 @@ def test_the_gating_study_gates_the_papers_drf_only():
     models = {("drf", 0): build_model(default_config("drf", "pendulum", 2, latent=4)),
               ("drf_calibrated", 0): build_model(default_config("drf_calibrated", "pendulum", 2, latent=4))}
     assert list(gated_models(models)) == [0] and gated_models(models)[0] is models[("drf", 0)]
+
+
+def test_the_both_halves_rule_needs_a_calibrated_gain_an_accurate_fit_and_then_the_longest_open_loop():
+    import pandas as pd
+    from drfkit.study.dissection import screen_both_halves
+
+    means = pd.DataFrame({"r_level_spearman": [0.99, 0.99, 0.5, 0.99],
+                          "gain_slope": [-0.2, -0.2, -0.5, 0.1],
+                          "mae": [0.015, 0.0151, 0.009, 0.009],
+                          "open_loop_horizon": [9.0, 15.0, 15.0, 15.0]}, index=["a", "b", "c", "d"])
+    out = screen_both_halves(means, reference_mae=0.010)
+    # b: MAE above 1.5x the yardstick's; c: r does not follow the noise; d: the gain rises with it
+    assert out["eligible"].tolist() == [True, False, False, False]
+    assert out.index[out["chosen"]].tolist() == ["a"]
+    tie = screen_both_halves(means.assign(mae=[0.015, 0.012, 0.009, 0.009], open_loop_horizon=[14.0, 15.0, 15, 15]),
+                             0.010)
+    assert tie.index[tie["chosen"]].tolist() == ["b"]              # the longest; a within a frame, less accurate
+    tie = screen_both_halves(means.assign(mae=[0.011, 0.012, 0.009, 0.009], open_loop_horizon=[14.0, 15.0, 15, 15]),
+                             0.010)
+    assert tie.index[tie["chosen"]].tolist() == ["a"]              # a tie on H goes to the lower MAE
+    longer = screen_both_halves(means.assign(mae=[0.011, 0.015, 0.009, 0.009], open_loop_horizon=[13.9, 15.0, 15, 15]),
+                                0.010)
+    assert longer.index[longer["chosen"]].tolist() == ["b"]        # more than a frame longer wins over accuracy
+    assert not screen_both_halves(means.assign(gain_slope=0.2), 0.010)["chosen"].any()

@@ -56,6 +56,17 @@ def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_bad_value_for_a_notebook_not_run_is_refused_before_any_work(tmp_path):
+    """pend_epochs belongs to notebook 01; a run of 00 alone still checks it, against the whole profile's schema."""
+    env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", "quick", "--only",
+                           "00_data_prep", "--set", "pendulum.epochs=abc"],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and "epochs" in proc.stderr, proc.stderr[-2000:]
+    assert not (tmp_path / "results" / "quick" / "executed").exists()
+
+
+@pytest.mark.slow
 def test_the_pipeline_s_kernels_run_over_ipc_and_print_no_tcp_warning(tmp_path, capfd):
     """drfkit.book.pipeline.ipc_kernels: the kernel papermill starts listens on Unix sockets in a
     private folder, not on TCP ports, so ipykernel has no 'running over TCP without encryption'

@@ -1,5 +1,6 @@
 """``python -m drfkit train`` trains exactly the checkpoints a notebook would use, so a
 long profile can be spread over processes or sessions."""
+import numpy as np
 import pytest
 
 from drfkit.study import pedestrian_runs, studies
@@ -204,10 +205,13 @@ def test_dynamics_probes_a_trained_drf_and_names_the_command_for_a_missing_one(t
     table = tmp_path / "dissection.csv"
     assert cli(["dynamics", *args, "--level", "0.5", "--dissect", "--csv", str(table)]) == 0
     out = capsys.readouterr().out
-    assert "e2_over_p" in out and "mae_blackout_clamped" in out
+    assert "e2_over_p" in out and "mae_blackout_clamped" in out and "open_loop_horizon" in out
     import pandas as pd
     row = pd.read_csv(table).iloc[0]
-    assert row["model"] == "drf" and row["failure"] == "not measured"   # no no_dynamics named: no yardstick
+    assert row["model"] == "drf" and row["clamped_gain_max"] == 0.0          # the clamp read back as exactly 0
+    assert np.isnan(row["no_dynamics_mae_ood"])                               # no no_dynamics named: no yardstick
+    assert row["verdict_ood"] in ("gain", "filtering") and row["verdict_blackout"].startswith(("gain", "transition",
+                                                                                               "filtering"))
 
 
 def test_the_restart_rule_trains_a_replaced_slot_from_its_own_seed_and_checks_every_run(tiny_profile, tmp_path,

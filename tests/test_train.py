@@ -340,7 +340,7 @@ def test_later_fields_at_their_defaults_leave_names_and_fingerprints_as_before()
 
     cfg = train_cfg()
     later = ("select_on", "objective", "beta", "mse_warmup", "lr_schedule", "weight_decay", "window", "prior_weight",
-             "obs_weight")
+             "obs_weight", "skip_spans", "skip_fraction")
     before = {k: v for k, v in vars(cfg).items() if k not in later}  # a run made before these fields existed
     assert naming_fields(cfg) == {k: v for k, v in before.items() if k != "patience"}
     assert fingerprint({}, cfg, "d") == param_hash({"model": {}, "train": {k: v for k, v in before.items()

@@ -142,7 +142,10 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
     names = [n for n in NOTEBOOKS if not only or n in only]
     if only and set(only) - set(NOTEBOOKS):
         raise ParameterError(f"unknown notebook(s) {sorted(set(only) - set(NOTEBOOKS))}; known: {list(NOTEBOOKS)}")
-    per_notebook = {name: notebook_params(name, values) for name in names}  # all errors before any run
+    # every notebook's values checked, not only those run: a bad --set is an error before any work, whichever
+    # notebook declares the key
+    checked = {name: notebook_params(name, values) for name in NOTEBOOKS}
+    per_notebook = {name: checked[name] for name in names}
     root, out_dir = results_dir(profile_name), results_dir(profile_name, "executed")
     previous, finished = {}, {}  # read under the lock, after a killed run was undone
     started, t0 = now_iso(), time.perf_counter()

@@ -80,11 +80,32 @@ def screen(argv: list[str]) -> int:
     ap.add_argument("--csv", default=None, help="also write the table here")
     ap.add_argument("--per-seed", action="store_true",
                     help="one row per seed, with 'failed' (r does not follow the noise) and the failure rate")
+    ap.add_argument("--rule", default="calibrated", choices=["calibrated", "both_halves"],
+                    help="the fourth round's calibrated-gain rule, or the fifth round's (a calibrated gain AND an "
+                         "open loop that predicts; needs --reference)")
+    ap.add_argument("--reference", default=None, metavar="VARIANT",
+                    help="with --rule both_halves: the yardstick, a variant of the fourth round's calibrated-gain screen "
+                         "(its row of results/<profile>/tables/pendulum_calibrated_screen.csv gives the MAE bound)")
     args = ap.parse_args(argv)
     if not _known_variants(args.variants) or (P := for_command("02_pendulum_dynamics", args.profile)) is None:
         return 2
+    reference_mae = None
+    if args.rule == "both_halves":
+        import pandas as pd
+
+        from drfkit.util.paths import results_dir
+
+        path = results_dir(P.profile) / "tables" / "pendulum_calibrated_screen.csv"
+        rows = pd.read_csv(path) if path.exists() else None
+        if rows is None or args.reference not in set(rows["variant"]):
+            print(f"--rule both_halves needs --reference naming a variant of {path} (the calibrated-gain screen: "
+                  f"python -m drfkit screen --profile {args.profile} --variants ... --csv {path}); got "
+                  f"{args.reference!r}")
+            return 2
+        reference_mae = float(rows.loc[rows["variant"] == args.reference, "mae"].iloc[0])
     torch.set_num_threads(args.threads)
-    table = screen_variants(P, args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed)
+    table = screen_variants(P, args.variants, args.seeds, args.budget, args.out, per_seed=args.per_seed,
+                            rule=args.rule, reference_mae=reference_mae)
     print(table.round(4).to_string(index=False))
     if args.per_seed:
         for variant, rows in table.groupby("variant", sort=False):
@@ -166,7 +187,8 @@ def dynamics(argv: list[str]) -> int:
     ap.add_argument("--last", action="store_true", help="the last epoch's weights, not the selected ones")
     ap.add_argument("--dissect", action="store_true",
                     help="also the dissection (drfkit.study.dissection): variances against their errors per noise "
-                         "level and the interventions; name no_dynamics among --models for the verdict's yardstick")
+                         "level, the open loop by horizon and the oracle gain; name no_dynamics among --models "
+                         "for its yardstick")
     ap.add_argument("--csv", default=None, help="with --dissect: write the interventions table here")
     ap.add_argument("--restarts", default=None, metavar="CSV",
                     help="only the validation-only restart rule on each --models kind's runs (every seed slot, the "
@@ -204,10 +226,12 @@ def dynamics(argv: list[str]) -> int:
             from drfkit.study.dissection import calibration_summary, dissect_filters
             from drfkit.util.io import atomic_write_csv
 
-            calibration, interventions = dissect_filters(P, models, split=args.split, fit_split="val")
+            calibration, interventions, horizons, _ = dissect_filters(P, models, split=args.split)
             if len(calibration):
                 print(calibration_summary(calibration).to_string())
             print(interventions.to_string(index=False))
+            if len(horizons):
+                print(horizons.pivot_table(index="h", columns=["model", "seed"], values="mae_clamped").round(4).to_string())
             if args.csv:
                 atomic_write_csv(args.csv, interventions)
     return 0

@@ -41,7 +41,7 @@ from __future__ import annotations
 import torch
 from torch.autograd.function import once_differentiable
 
-__all__ = ["kalman_predict", "kalman_update", "kalman_step", "kalman_step_unchecked", "ekf_update",
+__all__ = ["kalman_predict", "kalman_update", "kalman_step", "kalman_step_unchecked", "ekf_update", "gain_update",
            "CHOLESKY_JITTER"]
 
 # Multiplier of the jitter added to the diagonal of S when its Cholesky factorisation
@@ -285,6 +285,34 @@ def ekf_update(z: torch.Tensor, P: torch.Tensor, innovation: torch.Tensor, H: to
     I_minus_KH.diagonal(dim1=-2, dim2=-1).add_(1.0)
     P_new = (I_minus_KH @ P) @ I_minus_KH.mT + (K * R.unsqueeze(-2)) @ K.mT
     return z_new, _symmetrise(P_new), K
+
+
+def gain_update(z: torch.Tensor, P: torch.Tensor, innovation: torch.Tensor, H: torch.Tensor, R: torch.Tensor,
+                K: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The update with a gain the caller chooses (an intervention: the dissection's clamped or oracle gain,
+    the training's skipped updates), Joseph form.
+
+        z <- z + K y,      P <- (I - K H) P (I - K H)^T + K R K^T
+
+    z (..., n); P (..., n, n); innovation y = w - h(z) (..., m); H (..., m, n); R (..., m) diagonal; K (..., n, m).
+    The Joseph form is the covariance of z + K y for ANY K (the short form P - K H P holds only at the optimal
+    gain), so the reported P is the honest variance of the intervened estimate. K = 0 returns z and P exactly:
+    no observation reaches the state, whatever R or the innovation hold. Returns z_new (..., n), P_new (..., n, n)
+    symmetrised.
+    """
+    for name, t in (("z", z), ("P", P), ("innovation", innovation), ("H", H), ("R", R), ("K", K)):
+        _require_tensor(name, t)
+    _check_dtypes(z=z, P=P, innovation=innovation, H=H, R=R, K=K)
+    n, m = _state_size(z), innovation.shape[-1]
+    _check_matrix("P", P, n)
+    if H.shape[-2:] != (m, n) or R.shape[-1] != m or K.shape[-2:] != (n, m):
+        raise ValueError(f"gain_update: H must be (..., {m}, {n}), R (..., {m}) and K (..., {n}, {m}) for a state of "
+                         f"{n} and an innovation of {m}; got H {_shape(H)}, R {_shape(R)}, K {_shape(K)}")
+    z_new = z + (K @ innovation.unsqueeze(-1)).squeeze(-1)
+    I_minus_KH = -(K @ H)
+    I_minus_KH.diagonal(dim1=-2, dim2=-1).add_(1.0)
+    P_new = (I_minus_KH @ P) @ I_minus_KH.mT + (K * R.unsqueeze(-2)) @ K.mT
+    return z_new, _symmetrise(P_new)
 
 
 def _batched_diagonal(z, P, F, Q, w, R) -> bool:

@@ -1,5 +1,5 @@
 """Why a filter does or does not filter: its internals frame by frame, their calibration per noise
-level, and two interventions that say whether the gain or the transition is at fault. Inference only.
+level, and interventions on its gain that say whether the gain or the transition is at fault. Inference only.
 
 A Kalman filter filters when three things hold; each is measured here on the observed block of the
 state (the dims a frame observes, in the space the observation lives in: ``model.filter_internals``):
@@ -11,20 +11,29 @@ state (the dims a frame observes, in the space the observation lives in: ``model
 x_t is what the observed block should hold on frame t (``model.observed_truth``): the true (cos, sin)
 where the state is in the output's units, else the encoder's observation of the same frame without noise.
 
-The interventions replace r and rerun the same filter, nothing retrained:
+The interventions force the filter's gain (``drfkit.models.filtering``: a flag of the step, not an input),
+the same model and observations otherwise, nothing retrained:
 
-(a) clamped gain: r = ``R_CLAMP`` on the blackout frames (gain ~ 0): can the learned transition coast?
-(b) a competent r at a level no training frame had: r_t = a_i exp(b_i level_t) per observed dim, fit on
-    validation frames of the training levels (``fit_log_linear_r``), and r_t = each level bin's own
-    error variance on the scored frames (``r_from_levels``, an oracle no model has). Both are put on the
-    model's own scale of r (divided per dim by E[err^2] / E[r] on validation, ``r_scale``): a latent
-    filter's r need not be its error's variance, and its decoder reads P on the scale it learned.
-(c) (b)'s oracle r with q scaled so that the prior's variance matches its error on validation
-    (``calibrate_q_scale``): F's prediction alone, with both variances competent.
+(a1) the gain exactly 0 on a gap: z_t = F_t z_{t-1}, P_t = F P F^T + Q, no update. The gain is read back and
+     one above ``GAIN_TOLERANCE`` is an error (``check_clamped``). A large r is no clamp: where F expands, P
+     grows until P / (P + r) reads the frames again.
+(a2) the open-loop error by horizon h = 1..``HORIZON`` in output space, and the angle error of the normalised
+     output (bounded by pi), beside zero-order hold of the last decoded estimate (``hold``); the transition's
+     horizon H (``open_loop_horizon``): the leading h where it beats hold and stays <= ``OPEN_LOOP_MAX``.
+(a3) the gain clamped on the first k gap frames only, then the model's own gain: a gain failure (the error
+     jumps when the own gain resumes on noise) apart from a stability failure (it grows while clamped).
+(b)  an oracle GAIN per level bin, K* = e^2 / (e^2 + err^2), from output-space errors on the scored frames
+     (e: the prior F z_{t-1} decoded with the previous belief's variance; err: the observation decoded alone),
+     forced on every frame (``oracle_gain_table``, ``oracle_gain``): what a gain that knew each level's errors
+     would give with the model's own transition and observations.
 
-An intervened filter is decoded with the variance input its decoder saw without the intervention (in (a)
-held at the last frame before the gap): a decoder that reads P (the paper's) never saw the variances of a
-15-frame coast or of an r on another scale, and its mean would report that rather than the state's.
+An intervened filter is decoded with the variance input its decoder saw without the intervention (held at the
+last frame before a gap, ``held_variance``; as it ran elsewhere): a decoder that reads P (the paper's) never saw
+the variances of a 15-frame coast, and its mean would report that rather than the state's.
+
+The verdict per horizon, written before the measurement (``horizon_verdicts``): 'gain' where the clamped error
+is below the model's as it runs (ignoring the frames would be better: the gain reads what it should not);
+'transition' where the clamped error beats neither hold nor the model as it runs; else 'filtering'.
 
 Shapes: N sequences, T frames, k observed dims, n state dims (w and r are (N, T, n)).
 """
@@ -36,11 +45,10 @@ import math
 import numpy as np
 import torch
 
-R_CLAMP = 1e6          # an observation variance that makes the gain ~ P / 1e6: the frame is ignored
-LEVEL_BIN = 0.05       # width of the noise-level bins of the calibration table and of the r fits
-COAST_MAX_MAE = 0.10   # (a) the transition coasts: blackout MAE with the gain clamped <= this
-COMPETENT_RATIO = 0.5  # (b) a competent gain helps: MAE at the OOD level <= this x no_dynamics'
-Q_SCALES = (30.0, 10.0, 3.0, 1.0, 0.3, 0.1, 0.03, 0.01, 0.003, 0.001)  # (c) the q scales tried when calibrating the prior's variance
+LEVEL_BIN = 0.05        # width of the noise-level bins of the calibration table and of the oracle gain
+GAIN_TOLERANCE = 1e-6   # (a1) a clamped frame whose gain reads back above this is an error, not a measurement
+HORIZON = 15            # (a2) open-loop horizons h = 1..HORIZON (the blackout's length)
+OPEN_LOOP_MAX = 0.10    # (a2) the transition predicts at horizon h: output MAE <= this (chance is about 0.62)
 
 
 def observations(model, images: torch.Tensor, batch_size: int = 200) -> tuple[torch.Tensor, torch.Tensor]:
@@ -55,33 +63,58 @@ def observations(model, images: torch.Tensor, batch_size: int = 200) -> tuple[to
         model.train(was_training)
 
 
-def override_r(r: torch.Tensor, r_new: np.ndarray | torch.Tensor, k: int) -> torch.Tensor:
-    """r (N, T, n) with its observed block [..., :k] replaced by ``r_new`` (N, T, k) where that is not NaN."""
-    r_new = torch.as_tensor(np.asarray(r_new), dtype=r.dtype)
-    if r_new.shape != (*r.shape[:2], k):
-        raise ValueError(f"r_new must be (N, T, k) = {(*r.shape[:2], k)}, got {tuple(r_new.shape)}")
-    out = r.clone()
-    out[..., :k] = torch.where(torch.isnan(r_new), r[..., :k], r_new)
+def observation_outputs(model, images: torch.Tensor, batch_size: int = 200) -> np.ndarray:
+    """The output mean (N, T, out) decoded from each frame's observation alone (``model.observation_output``),
+    dropout off: what the frame says without the filter (the oracle gain's err)."""
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            return torch.cat([model.observation_output(images[i:i + batch_size])[0]
+                              for i in range(0, images.shape[0], batch_size)]).double().numpy()
+    finally:
+        model.train(was_training)
+
+
+def forced_gain(shape: tuple[int, int], start: int, stop: int, value: float = 0.0) -> torch.Tensor:
+    """A forced gain (N, T) for ``filter_pass``: ``value`` on frames [start, stop), NaN (the filter's own) elsewhere."""
+    if not 1 <= start <= stop <= shape[1]:
+        raise ValueError(f"a forced span must lie in frames [1, {shape[1]}] (frame 0 is the filter's start), got "
+                         f"[{start}, {stop})")
+    out = torch.full(shape, float("nan"), dtype=torch.float64)
+    out[:, start:stop] = value
     return out
+
+
+def check_clamped(trace: dict[str, np.ndarray], gain: torch.Tensor, tolerance: float = GAIN_TOLERANCE) -> float:
+    """The largest |gain| the filter reported on the frames where ``gain`` forced 0; raises ValueError above
+    ``tolerance``: an intervention that does not do what it says is not a measurement."""
+    at = (gain == 0).numpy()
+    worst = float(trace["gain_abs_max"][at].max()) if at.any() else 0.0
+    if not worst <= tolerance:
+        raise ValueError(f"the clamped gain reads back as {worst:.3g} on the clamped frames (> {tolerance:g}): the "
+                         "filter did not skip its update there; check the model's forced-gain step")
+    return worst
 
 
 def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, targets: np.ndarray,
                 batch_size: int = 200, q_scale: float = 1.0, log_var: np.ndarray | None = None,
-                float64: bool = False) -> dict[str, np.ndarray]:
-    """The filter on observations w, r (N, T, n), its q times ``q_scale``, against ``truth`` (N, T, k)
-    (``model.observed_truth``); ``log_var`` (N, T, v): the output decoded with these belief log variances
-    in place of the filter's own (``model.with_belief_variance``; an intervened filter decoded with the
-    variance input its decoder knows). ``float64``: the pass on a float64 copy of the model (the model
-    itself is untouched): a transition that diverges while the gain is clamped grows P past what float32
-    keeps positive definite next to r = R_CLAMP, and the measurement is how far it diverges, not where
-    float32 gives out.
+                float64: bool = False, gain: torch.Tensor | None = None) -> dict[str, np.ndarray]:
+    """The filter on observations w, r (N, T, n), its q times ``q_scale`` and its gain forced where ``gain``
+    (N, T) is not NaN (``forced_gain``), against ``truth`` (N, T, k) (``model.observed_truth``); ``log_var``
+    (N, T, v): the output decoded with these belief log variances in place of the filter's own where not NaN
+    (``model.with_belief_variance``; an intervened filter decoded with the variance input its decoder knows).
+    ``float64``: the pass on a float64 copy of the model (the model itself is untouched): a transition that
+    diverges while the gain is clamped grows P past float32's range within 15 frames, and the measurement is how
+    far it diverges, not where float32 gives out.
 
     Returns per frame, on the observed block, as sums over its k dims (so ratios of means are ratios
     of traces): 'r' (N, T); 'obs_err2' (N, T) = ||w - x||^2 and 'obs_err2_dims' (N, T, k);
     'p_prior', 'q', 'prior_err2' (N, T-1) = trace of the prior's variance, of q, and ||F z - x||^2;
-    'gain' (N, T) mean diag of the gain over the block; 'log_var' (N, T, v) the belief's log variances the
-    output read; 'mean' (N, T, out) the dropout-off output and 'abs_err' (N, T) its mean absolute error
-    against ``targets`` (N, T, out)."""
+    'gain' (N, T) mean diag of the gain over the block and 'gain_abs_max' (N, T) its largest |entry|; 'log_var'
+    (N, T, v) the belief's log variances the output read; 'mean' (N, T, out) the dropout-off output and 'abs_err'
+    (N, T) its mean absolute error against ``targets`` (N, T, out); 'prior_mean' (N, T-1, out) the one-step prior
+    decoded with the previous belief's log variances (what the filter expects of frame t before seeing it)."""
     k = model.observed_dims
     if truth.shape != (*w.shape[:2], k):
         raise ValueError(f"truth must be (N, T, k) = {(*w.shape[:2], k)}, got {tuple(truth.shape)}")
@@ -95,15 +128,22 @@ def filter_pass(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, ta
         with torch.no_grad():
             for i in range(0, w.shape[0], batch_size):
                 sl = slice(i, i + batch_size)
-                out = model.filter_internals(w[sl], r[sl], q_scale=q_scale)
+                forced = None if gain is None else gain[sl].to(w.dtype)
+                out = model.filter_internals(w[sl], r[sl], q_scale=q_scale, gain=forced)
                 x = truth[sl].to(w.dtype)
                 err_dims = (w[sl, :, :k] - x).square()
+                belief_var = model.belief_variance(out["h"])
+                read_var = belief_var
+                if log_var is not None:  # NaN entries: the filter's own variance there
+                    given = torch.as_tensor(log_var[sl], dtype=out["h"].dtype)
+                    read_var = torch.where(torch.isnan(given), belief_var, given)
                 values = {"r": r[sl, :, :k].sum(-1), "obs_err2": err_dims.sum(-1), "obs_err2_dims": err_dims,
                           "p_prior": out["p_prior"].sum(-1), "q": out["q"].sum(-1),
                           "prior_err2": (out["prior"] - x[:, 1:]).square().sum(-1),
-                          "gain": out["gain"].mean(-1), "log_var": model.belief_variance(out["h"]),
-                          "mean": model.head(out["h"] if log_var is None else model.with_belief_variance(
-                              out["h"], torch.as_tensor(log_var[sl], dtype=out["h"].dtype)))[0]}
+                          "gain": out["gain"].mean(-1), "gain_abs_max": out["gain"].abs().amax(-1),
+                          "log_var": belief_var,
+                          "mean": model.head(model.with_belief_variance(out["h"], read_var))[0],
+                          "prior_mean": model.head(model.with_belief_variance(out["h_prior"], read_var[:, :-1]))[0]}
                 for name, value in values.items():
                     parts.setdefault(name, []).append(value.double().numpy())
     finally:
@@ -140,77 +180,97 @@ def calibration_table(trace: dict[str, np.ndarray], noise: np.ndarray, width: fl
     return rows
 
 
-def fit_log_linear_r(obs_err2_dims: np.ndarray, noise: np.ndarray, max_level: float = 0.5,
-                     width: float = LEVEL_BIN) -> tuple[np.ndarray, np.ndarray]:
-    """log r_i(level) = log a_i + b_i level per observed dim i: least squares of each level bin's log mean
-    squared error (obs_err2_dims (N, T, k)) on the bin's mean level, over bins of levels <= ``max_level``
-    (the training levels: fit on validation frames). Returns (log_a, b), each (k,). A link that is
-    log-linear in the level extrapolates by construction to levels no training frame had."""
-    noise = np.asarray(noise, dtype=np.float64)
-    bins = level_bins(noise, width)
-    keep = noise <= max_level
-    xs, ys = [], []
-    for b in np.unique(bins[keep]):
-        at = keep & (bins == b)
-        xs.append(noise[at].mean())
-        ys.append(np.log(obs_err2_dims[at].mean(0)))                  # (k,)
-    if len(xs) < 2:
-        raise ValueError(f"fitting r against the level needs frames in at least two bins of width {width} at "
-                         f"levels <= {max_level}; got {len(xs)}")
-    A = np.stack([np.ones(len(xs)), np.asarray(xs)], 1)                   # (bins, 2)
-    coef, *_ = np.linalg.lstsq(A, np.stack(ys), rcond=None)               # (2, k)
-    return coef[0], coef[1]
 
 
-def r_scale(trace: dict[str, np.ndarray], r: torch.Tensor) -> np.ndarray:
-    """E[err_i^2] / E[r_i] per observed dim i (k,) of a :func:`filter_pass` on r (N, T, n): how many times
-    its error's variance r is (1 where r is calibrated); a competent r divided by it is on the model's scale."""
-    k = trace["obs_err2_dims"].shape[-1]
-    return trace["obs_err2_dims"].reshape(-1, k).mean(0) / r[..., :k].double().reshape(-1, k).mean(0).numpy()
-
-
-def r_from_fit(noise: np.ndarray, log_a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """r (N, T, k) = exp(log_a + b level) from a :func:`fit_log_linear_r` fit and the frames' levels."""
-    return np.exp(np.asarray(log_a) + np.asarray(b) * np.asarray(noise, dtype=np.float64)[..., None])
-
-
-def r_from_levels(obs_err2_dims: np.ndarray, noise: np.ndarray, width: float = LEVEL_BIN) -> np.ndarray:
-    """r (N, T, k): each frame's level bin's mean squared observation error per dim, on the frames
-    themselves (an oracle: it reads the errors it is meant to predict)."""
-    bins = level_bins(noise, width)
-    out = np.empty(obs_err2_dims.shape)
-    for b in np.unique(bins):
-        at = bins == b
-        out[at] = obs_err2_dims[at].mean(0)
-    return out
-
-
-def held_variance(log_var: np.ndarray, start: int, stop: int) -> np.ndarray:
+def held_variance(log_var: np.ndarray, start: int, stop: int, elsewhere: float | None = None) -> np.ndarray:
     """log_var (N, T, v) with frames [start, stop) holding frame start - 1's values: what the decoder
-    reads through a gap in intervention (a)."""
+    reads through a clamped gap; ``elsewhere`` = NaN: the other frames left to the filter's own (``filter_pass``)."""
     out = np.array(log_var, copy=True)
     out[:, start:stop] = log_var[:, start - 1:start]
+    if elsewhere is not None:
+        out[:, :start], out[:, stop:] = elsewhere, elsewhere
     return out
 
 
-def clamp_frames(shape: tuple[int, int, int], start: int, stop: int) -> np.ndarray:
-    """r_new (N, T, k) for ``override_r``: ``R_CLAMP`` on frames [start, stop), NaN (keep r) elsewhere."""
-    out = np.full(shape, np.nan)
-    out[:, start:stop] = R_CLAMP
+# ------------------------------------------------------------------ (a2) the open loop, by horizon
+def angle_error(mean: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """|wrapped angle of the output - the true angle| (N, T) in [0, pi]: the output (N, T, 2) read as
+    (cos, sin) and normalised, so a state that grows without bound still has a bounded error."""
+    diff = np.arctan2(mean[..., 1], mean[..., 0]) - np.arctan2(targets[..., 1], targets[..., 0])
+    return np.abs(np.angle(np.exp(1j * diff)))
+
+
+def hold(mean: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Zero-order hold (N, T, out): frames [start, stop) carry frame start - 1's estimate, the others their own."""
+    out = np.array(mean, dtype=np.float64, copy=True)
+    out[:, start:stop] = mean[:, start - 1:start]
     return out
 
 
-def calibrate_q_scale(model, w: torch.Tensor, r: torch.Tensor, truth: torch.Tensor, targets: np.ndarray,
-                      scales=Q_SCALES) -> tuple[float, float]:
-    """The q scale of ``scales`` whose prior variance best matches the prior's error on these frames
-    (smallest |log E[||F z - x||^2] / E[P_prior]|; read them from validation). Returns (scale, ratio)."""
-    best = (math.inf, 1.0, math.nan)
-    for scale in scales:
-        trace = filter_pass(model, w, r, truth, targets, q_scale=scale)
-        ratio = float(trace["prior_err2"].mean() / trace["p_prior"].mean())
-        if abs(math.log(ratio)) < best[0]:
-            best = (abs(math.log(ratio)), float(scale), ratio)
-    return best[1], best[2]
+def per_horizon(err: np.ndarray, start: int, horizon: int = HORIZON) -> np.ndarray:
+    """The mean over sequences of a per-frame error (N, T) at horizons h = 1..``horizon`` after a gap starting at
+    ``start`` (frame start + h - 1): (horizon,)."""
+    if start + horizon > err.shape[1]:
+        raise ValueError(f"horizons 1..{horizon} from frame {start} need {start + horizon} frames, have {err.shape[1]}")
+    return err[:, start:start + horizon].mean(0)
+
+
+def open_loop_horizon(clamped: np.ndarray, held: np.ndarray, max_err: float = OPEN_LOOP_MAX) -> int:
+    """H: how many leading horizons the open-loop error ``clamped`` (H,) is below hold's ``held`` (H,) and <=
+    ``max_err`` (0 when it fails at h = 1; len(clamped) when it never fails)."""
+    ok = (np.asarray(clamped) < np.asarray(held)) & (np.asarray(clamped) <= max_err)
+    return int(ok.size if ok.all() else np.argmin(ok))
+
+
+def verdict_runs(verdicts: list[str]) -> str:
+    """The per-horizon verdicts as runs: ['gain', 'gain', 'transition'] -> 'gain h1-2, transition h3'."""
+    runs, start = [], 0
+    for i in range(1, len(verdicts) + 1):
+        if i == len(verdicts) or verdicts[i] != verdicts[start]:
+            span = f"h{start + 1}" if i - start == 1 else f"h{start + 1}-{i}"
+            runs.append(f"{verdicts[start]} {span}")
+            start = i
+    return ", ".join(runs)
+
+
+def horizon_verdicts(clamped: np.ndarray, as_run: np.ndarray, held: np.ndarray) -> list[str]:
+    """The rule per horizon, written before the measurement: 'gain' where the clamped error is below the model's
+    as it runs; 'transition' where it beats neither hold nor the model as it runs; else 'filtering' (the model as
+    it runs is at least as good as ignoring the frames, and the transition beats hold)."""
+    out = []
+    for c, a, h in zip(np.asarray(clamped), np.asarray(as_run), np.asarray(held)):
+        out.append("gain" if c < a else "transition" if c >= h else "filtering")
+    return out
+
+
+# ------------------------------------------------------------------ (b) the oracle gain
+def oracle_gain_table(prior_err2: np.ndarray, obs_err2: np.ndarray, noise: np.ndarray,
+                      width: float = LEVEL_BIN) -> list[dict]:
+    """K* = e^2 / (e^2 + err^2) per level bin (frames t >= 1), from output-space squared errors (N, T-1) of the
+    one-step prior (e) and of the observation decoded alone (err) on the frames' levels ``noise`` (N, T): the gain
+    that weighs the two by their measured errors (a scalar Kalman gain). Rows: level_lo, level_hi, frames,
+    prior_err2, obs_err2, gain."""
+    bins = level_bins(noise, width)[:, 1:]
+    rows = []
+    for b in np.unique(bins):
+        at = bins == b
+        pure = b == np.iinfo(np.int32).max
+        e2, err2 = float(prior_err2[at].mean()), float(obs_err2[at].mean())
+        rows.append({"level_lo": 1.0 if pure else b * width, "level_hi": 1.0 if pure else (b + 1) * width,
+                     "frames": int(at.sum()), "prior_err2": e2, "obs_err2": err2, "gain": e2 / (e2 + err2)})
+    return rows
+
+
+def oracle_gain(noise: np.ndarray, table: list[dict], width: float = LEVEL_BIN) -> torch.Tensor:
+    """The forced gain (N, T) of ``oracle_gain_table``'s rows on frames of levels ``noise`` (N, T): each frame its
+    bin's K*, NaN at t = 0 (the start) and in a bin the table has no row for."""
+    bins = level_bins(noise, width)
+    out = np.full(bins.shape, np.nan)
+    for row in table:
+        b = np.iinfo(np.int32).max if row["level_lo"] >= 1.0 else int(round(row["level_lo"] / width))
+        out[bins == b] = row["gain"]
+    out[:, 0] = np.nan
+    return torch.from_numpy(out)
 
 
 def in_distribution_screen(trace: dict[str, np.ndarray], noise: np.ndarray, max_level: float,
@@ -234,28 +294,10 @@ def in_distribution_screen(trace: dict[str, np.ndarray], noise: np.ndarray, max_
             "gain_slope": slope(gains), "mae": float(trace["abs_err"][:, 1:][keep].mean())}
 
 
-def failure_verdict(mae_blackout_clamped: float, mae_ood_competent: float, mae_ood_no_dynamics: float,
-                    mae_ood_competent_q: float = math.nan, coast_max: float = COAST_MAX_MAE,
-                    ratio_max: float = COMPETENT_RATIO) -> str:
-    """The rule written before the measurement: with the gain clamped on the blackout the transition
-    coasts (MAE <= ``coast_max``) AND with a competent r the MAE at the OOD level is <= ``ratio_max`` x
-    no_dynamics' -- then the transition suffices and what fails is the gain's calibration: 'gain'.
-    Otherwise, if it coasts and a competent r with q calibrated on validation (``mae_ood_competent_q``,
-    intervention c) meets the same bound, F predicts and q misstates the prior's error: 'prior variance';
-    else the transition's prediction fails too: 'transition'. NaN in (a), (b) or no_dynamics': 'not measured'."""
-    values = (mae_blackout_clamped, mae_ood_competent, mae_ood_no_dynamics)
-    if any(v is None or math.isnan(v) for v in values):
-        return "not measured"
-    coasts = mae_blackout_clamped <= coast_max
-    bound = ratio_max * mae_ood_no_dynamics
-    if coasts and mae_ood_competent <= bound:
-        return "gain"
-    if coasts and not math.isnan(mae_ood_competent_q) and mae_ood_competent_q <= bound:
-        return "prior variance"
-    return "transition"
 
 
-__all__ = ["COAST_MAX_MAE", "COMPETENT_RATIO", "LEVEL_BIN", "Q_SCALES", "R_CLAMP", "calibrate_q_scale",
-           "calibration_table", "clamp_frames", "held_variance",
-           "failure_verdict", "filter_pass", "in_distribution_screen", "fit_log_linear_r", "level_bins", "observations", "override_r",
-           "r_from_fit", "r_from_levels", "r_scale"]
+__all__ = ["GAIN_TOLERANCE", "HORIZON", "LEVEL_BIN", "OPEN_LOOP_MAX", "angle_error", "calibration_table", "check_clamped",
+           "filter_pass", "forced_gain", "held_variance", "hold", "horizon_verdicts", "in_distribution_screen",
+           "verdict_runs",
+           "level_bins", "observation_outputs", "observations", "open_loop_horizon", "oracle_gain", "oracle_gain_table",
+           "per_horizon"]

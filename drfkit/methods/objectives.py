@@ -73,8 +73,9 @@ def objective_loss(model, objective: str, beta: float, mean, sigma, targets, mas
 
 
 def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, prior_weight: float = 0.0,
-               obs_weight: float = 0.0) -> torch.Tensor:
-    """The training loss of one batch: ``objective_loss`` of the model's output, plus
+               obs_weight: float = 0.0, gain: torch.Tensor | None = None) -> torch.Tensor:
+    """The training loss of one batch: ``objective_loss`` of the model's output (with ``gain`` (B, T), a filter's
+    forced gain per frame: ``skip_spans``' skipped updates, NaN elsewhere), plus
 
     * ``prior_weight`` > 0: that weight times the same objective of the one-step prior decoded for
       frames 1..T-1 (``forward_with_prior``; a filter's prediction of each frame before seeing it, so
@@ -85,13 +86,17 @@ def batch_loss(model, objective: str, beta: float, inputs, targets, mask=None, p
     * the model's own ``regulariser()`` (0 for most; the known-dynamics filter's pull of a learned
       transition toward the true one).
     """
+    if gain is not None and not hasattr(model, "filter_internals"):
+        raise ValueError(f"TrainConfig.skip_spans skips a filter's updates, but {type(model).__name__} has no filter; "
+                         "set skip_spans = None for it")
+    forced = {} if gain is None else {"gain": gain}
     if prior_weight > 0:
         if not hasattr(model, "forward_with_prior"):
             raise ValueError(f"TrainConfig.prior_weight = {prior_weight} asks for the one-step prior's loss, but "
                              f"{type(model).__name__} has no filter prior; set prior_weight = 0 for it")
-        (mean, sigma), (prior_mean, prior_sigma) = model.forward_with_prior(inputs)
+        (mean, sigma), (prior_mean, prior_sigma) = model.forward_with_prior(inputs, **forced)
     else:
-        mean, sigma = model(inputs)
+        mean, sigma = model(inputs, **forced)
     loss = objective_loss(model, objective, beta, mean, sigma, targets, mask)
     if prior_weight > 0 and targets.shape[1] >= 2:
         prior_mask = None if mask is None else mask[:, 1:]
@@ -135,4 +140,24 @@ def random_windows(inputs: torch.Tensor, targets: torch.Tensor, mask: torch.Tens
     return inputs[rows, cols], targets[rows, cols], None if mask is None else mask[rows, cols]
 
 
-__all__ = ["OBJECTIVES", "batch_loss", "beta_nll", "make_optimiser", "mse", "objective_loss", "random_windows"]
+def skip_spans(batch: int, frames: int, spans, fraction: float, generator: torch.Generator) -> torch.Tensor:
+    """The forced gain (B, T) of a batch with skipped updates: in each window, with probability ``fraction``, one
+    span of L frames, L uniform in spans = [lo, hi] (cut to T - 1), starting uniform in [1, T - L] (frame 0, the
+    filter's start, is never skipped), gain 0 there; NaN (the filter's own gain) elsewhere. The frames themselves
+    stay ordinary training frames: only the filter is told to ignore them, so the loss on them asks the transition
+    to predict open loop over L frames (RKN's imputation)."""
+    lo, hi = int(spans[0]), int(spans[1])
+    gain = torch.full((batch, frames), float("nan"))
+    if frames < 2:
+        return gain
+    hi = min(hi, frames - 1)
+    lo = min(lo, hi)
+    use = torch.rand(batch, generator=generator) < fraction
+    length = torch.randint(lo, hi + 1, (batch,), generator=generator)
+    start = 1 + (torch.rand(batch, generator=generator) * (frames - length).to(torch.float64)).long()    # [1, T - L]
+    t = torch.arange(frames)[None, :]
+    inside = use[:, None] & (t >= start[:, None]) & (t < (start + length)[:, None])
+    return gain.masked_fill(inside, 0.0)
+
+
+__all__ = ["OBJECTIVES", "batch_loss", "beta_nll", "make_optimiser", "mse", "objective_loss", "random_windows", "skip_spans"]

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 VARIANT_FIELDS = ("kind", "model", "train", "blackouts", "train_max_noise")
 # what a recipe may set: TrainConfig's fields the profile does not own, and the data's business
 RECIPE_FIELDS = ("objective", "beta", "lr_schedule", "window", "batch_size", "select_on", "prior_weight", "obs_weight",
-                 "mse_warmup", "weight_decay", "grad_clip", "lr_step", "lr_gamma", "fresh_noise", "fresh_motion")
+                 "skip_spans", "skip_fraction", "mse_warmup", "weight_decay", "grad_clip", "lr_step", "lr_gamma", "fresh_noise", "fresh_motion")
 
 
 def _resolve(value: Any, parts: dict[str, Any], where: str) -> dict[str, Any]:
@@ -104,7 +104,7 @@ BLACKOUT_TRAINING = _resolve("training_blackouts", _PARTS, "params/protocols.yam
 BOOK_DRF = _resolve("book_drf", _PARTS, "params/protocols.yaml")
 FIT_THE_MEAN = _resolve("fit_the_mean", _PARTS, "params/protocols.yaml")
 WIDE_ENCODER = _resolve("wide", _PARTS, "params/protocols.yaml")
-ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS = (_ROUNDS.get(n, {}) for n in (2, 3, 4))
+ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS, ROUND5_VARIANTS = (_ROUNDS.get(n, {}) for n in (2, 3, 4, 5))
 
 # The ablation's budgets (``drfkit.study.ablation``); data from the profiles' pend_data_seed.
 ABLATION_BUDGETS: dict[str, dict[str, Any]] = {

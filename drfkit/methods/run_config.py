@@ -33,6 +33,10 @@ class TrainConfig:
     window: int | None = None  # train on one random window of this many frames per sequence and epoch
     prior_weight: float = 0.0  # weight of the loss on a filter's one-step prior (drfkit.methods.objectives.batch_loss)
     obs_weight: float = 0.0  # weight of the loss on the observation alone, (w_t, r_t) (drfkit.methods.objectives.batch_loss)
+    # a filter's updates skipped (gain 0) on one random span of [lo, hi] frames in a skip_fraction of the training
+    # windows, the loss on every frame: the open-loop prediction is fitted (drfkit.methods.objectives.skip_spans)
+    skip_spans: list | None = None
+    skip_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size"):
@@ -63,6 +67,15 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.prior_weight must be a number >= 0 (0 = no prior loss), got {self.prior_weight!r}")
         if not (isinstance(self.obs_weight, (int, float)) and self.obs_weight >= 0):
             raise ValueError(f"TrainConfig.obs_weight must be a number >= 0 (0 = no observation loss), got {self.obs_weight!r}")
+        if self.skip_spans is not None:
+            spans = self.skip_spans
+            if not (isinstance(spans, (list, tuple)) and len(spans) == 2 and all(
+                    isinstance(v, int) and not isinstance(v, bool) for v in spans) and 1 <= spans[0] <= spans[1]):
+                raise ValueError(f"TrainConfig.skip_spans must be None or [lo, hi], whole numbers 1 <= lo <= hi (the "
+                                 f"lengths of a skipped span), got {spans!r}")
+            self.skip_spans = [int(spans[0]), int(spans[1])]
+        if not (isinstance(self.skip_fraction, (int, float)) and 0 < self.skip_fraction <= 1):
+            raise ValueError(f"TrainConfig.skip_fraction must lie in (0, 1], got {self.skip_fraction!r}")
 
 
 SELECTION_METRICS = ("loss", "l1")
@@ -71,7 +84,7 @@ LR_SCHEDULES = ("step", "cosine")
 # fingerprints, so every run made before them keeps its files (and resumes).
 LATER_FIELDS = {"select_on": "loss", "objective": "model", "beta": 1.0, "mse_warmup": 0, "lr_schedule": "step",
                 "weight_decay": 0.0, "window": None, "prior_weight": 0.0,
-                "obs_weight": 0.0}
+                "obs_weight": 0.0, "skip_spans": None, "skip_fraction": 0.5}
 
 
 def train_fields(cfg: "TrainConfig") -> dict[str, Any]:

@@ -29,7 +29,7 @@ import torch
 
 from drfkit.util.io import CorruptArtefactError, atomic_torch_save, exclusive_lock, param_hash, torch_load_checked
 from drfkit.data.sequence_data import SequenceData
-from drfkit.methods.objectives import batch_loss, make_optimiser, random_windows
+from drfkit.methods.objectives import batch_loss, make_optimiser, random_windows, skip_spans
 from drfkit.methods.run_config import TrainConfig, fingerprint, naming_fields
 
 CHECKPOINT_FORMAT = 1
@@ -285,7 +285,9 @@ def _train_locked(model_config, train, val, cfg: TrainConfig, stem: Path, *, dat
             inputs, targets, mask = data.batch(idx, device)
             if cfg.window is not None:
                 inputs, targets, mask = random_windows(inputs, targets, mask, cfg.window, windows)
-            loss = batch_loss(model, objective, cfg.beta, inputs, targets, mask, cfg.prior_weight, cfg.obs_weight)
+            gain = None if cfg.skip_spans is None else skip_spans(
+                targets.shape[0], targets.shape[1], cfg.skip_spans, cfg.skip_fraction, windows).to(device)
+            loss = batch_loss(model, objective, cfg.beta, inputs, targets, mask, cfg.prior_weight, cfg.obs_weight, gain)
             if not torch.isfinite(loss):
                 raise NonFiniteLossError(
                     f"non-finite loss {loss.item()} at epoch {epoch + 1}, step {step} (sequences "

@@ -9,11 +9,11 @@ from typing import Any
 import torch
 from torch import nn
 
-from drfkit.core.filter import kalman_step
+from drfkit.core.filter import gain_update, kalman_predict, kalman_step
 from drfkit.models.basis import BasisTransition
 from drfkit.models.compiled import filter_loop
 from drfkit.models.parts import VARIANCE_FLOOR, mean_and_log_variance
-from drfkit.models.filtering import run_filter_loop, stack_steps
+from drfkit.models.filtering import run_filter_loop, select_forced, stack_steps
 from drfkit.models import recursion
 from drfkit.models.recursion import TransitionNetwork, check_observations, drf_recursion
 from drfkit.models.sequence import _EncodedSequenceModel
@@ -151,8 +151,10 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
                      return_transition: bool = False, return_prior: bool = False,
-                     q_scale: float = 1.0) -> dict[str, torch.Tensor]:
-        """The per-step filter loop on w, r (B, T, n), recording what was asked.
+                     q_scale: float = 1.0, gain: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The per-step filter loop on w, r (B, T, n), recording what was asked; ``gain`` (B, T) a forced gain
+        (``drfkit.models.filtering``: NaN = the filter's own; g = K_t = g on the observed dims, 0 on the memory
+        dims; 0 = no update).
 
         Always: 'z', 'p_diag' (B, T, n). ``return_gains``: 'gains' K (B, T, n, n), I at t = 0.
         ``return_transition``: 'F' (B, T-1, n, n), F_t for t = 1..T-1; 'q' (B, T-1, n); 'z_prior'
@@ -166,7 +168,7 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
                                          ("prior", return_prior)) if asked}
         first, steps = run_filter_loop(
             lambda w0, r0: self._filter_start(w0, r0, want),
-            lambda carry, w_t, r_t: self._filter_step(carry, w_t, r_t, q_scale, want), w, r)
+            lambda carry, w_t, r_t, g_t=None: self._filter_step(carry, w_t, r_t, q_scale, want, g_t), w, r, gain)
         empty = w.new_empty(batch, 0, n)
         out = {"z": stack_steps(steps, "z", empty, first["z"]), "p_diag": stack_steps(steps, "p_diag", empty, first["p_diag"])}
         if return_gains:
@@ -191,10 +193,11 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         return carry, record
 
     def _filter_step(self, carry, w_t: torch.Tensor, r_t: torch.Tensor, q_scale: float = 1.0,
-                     want: set = frozenset()):
+                     want: set = frozenset(), gain_t: torch.Tensor | None = None):
         """One step (``drfkit.models.filtering``): F_t, q_t from the transition on z_{t-1}, then the Kalman
-        predict and update with w_t, r_t (``kalman_step``); records z, p_diag and what ``want`` names
-        ('gains': K; 'transition': F, q, z_prior; 'prior': z_prior, p_prior)."""
+        predict and update with w_t, r_t (``kalman_step``; rows with a forced gain ``gain_t`` (B,) take
+        ``forced_update``); records z, p_diag and what ``want`` names ('gains': K; 'transition': F, q, z_prior;
+        'prior': z_prior, p_prior)."""
         z, P, state = carry
         F_t, q_t, state = self.transition(z, state)
         if q_scale != 1.0:
@@ -206,18 +209,41 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
             record["z_prior"] = (F_t @ z.unsqueeze(-1)).squeeze(-1)
         if "prior" in want:  # diag(F P F^T) without forming the product
             record["p_prior"] = torch.einsum("bij,bjk,bik->bi", F_t, P, F_t) + q_t
-        z, P, K = kalman_step(z, P, F_t, q_t, w_t, r_t)
+        if gain_t is None or torch.isnan(gain_t).all():
+            z, P, K = kalman_step(z, P, F_t, q_t, w_t, r_t)
+        else:  # the own update only where some row needs it: a forced row's P may be past what S = P + R factors
+            own = None if not torch.isnan(gain_t).any() else kalman_step(z, P, F_t, q_t, w_t, r_t)
+            z, P, K = select_forced(gain_t, self.forced_update(z, P, F_t, q_t, w_t, r_t, gain_t), own)
         record["z"], record["p_diag"] = z, P.diagonal(dim1=-2, dim2=-1)
         if "gains" in want:
             record["gains"] = K
         return (z, P, state), record
 
-    def forward_with_prior(self, inputs: torch.Tensor
+    def forced_update(self, z, P, F_t, q_t, w_t, r_t, gain_t) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Predict with F_t, q_t, then update with the gain forced to K = g I on the observed dims and 0 on the
+        memory dims, g = ``gain_t`` (B,) (NaN rows give NaN: ``select_forced`` drops them), Joseph form
+        (``gain_update``). Returns z, P (B, n), (B, n, n) and K (B, n, n); g = 0 gives z = F z, P = F P F^T + Q
+        exactly."""
+        z_pred, P_pred = kalman_predict(z, P, F_t, q_t)
+        observed = (torch.arange(self.latent, device=z.device) < self.observed_dims).to(z.dtype)       # (n,)
+        K = torch.diag_embed(torch.nan_to_num(gain_t, nan=0.0).unsqueeze(-1) * observed)              # (B, n, n)
+        z_new, P_new = gain_update(z_pred, P_pred, w_t - z_pred, self.transition.eye.to(z.dtype).expand_as(K),
+                                   r_t, K)
+        return z_new, P_new, K
+
+    def forward(self, inputs: torch.Tensor, gain: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, sigma) (B, T, out); ``gain`` (B, T) a forced gain per frame (``filter_steps``; None: the model)."""
+        if gain is None:
+            return super().forward(inputs)
+        trace = self.filter_steps(*self.observe(inputs), gain=gain)
+        return self.head(mean_and_log_variance(trace["z"], trace["p_diag"]))
+
+    def forward_with_prior(self, inputs: torch.Tensor, gain: torch.Tensor | None = None
                            ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]:
         """(mean, sigma) (B, T, out) of the posterior, as ``forward``, and (mean, sigma) (B, T-1, out)
         decoded by the same decoder from the one-step prior [z_{t|t-1}, log diag P_{t|t-1}],
-        t = 1..T-1: what the filter expects of frame t before seeing it. Per-step loop."""
-        trace = self.filter_steps(*self.observe(inputs), return_prior=True)
+        t = 1..T-1: what the filter expects of frame t before seeing it. Per-step loop; ``gain`` as ``forward``'s."""
+        trace = self.filter_steps(*self.observe(inputs), return_prior=True, gain=gain)
         posterior = self.head(mean_and_log_variance(trace["z"], trace["p_diag"]))
         prior = self.head(mean_and_log_variance(trace["z_prior"], trace["p_prior"]))
         return posterior, prior
@@ -251,16 +277,20 @@ class DeepRecursiveFilter(_EncodedSequenceModel):
         k = self.observed_dims
         return targets[..., :k] if self.readout == "identity" else w_clean[..., :k]
 
-    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
-        """The filter on w, r (B, T, n) with every q_t times ``q_scale``, seen on the observed block k
-        (``drfkit.methods.dissection``):
+    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0,
+                         gain: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The filter on w, r (B, T, n) with every q_t times ``q_scale`` and the forced ``gain`` (B, T) (NaN = its
+        own), seen on the observed block k (``drfkit.methods.dissection``):
         'prior' (B, T-1, k) F_t z_{t-1}, 'p_prior' (B, T-1, k) its variances diag(F P F^T) + q_t, 'q' (B, T-1, k),
-        'gain' (B, T, k) diag K_t (1 at t = 0) and 'h' (B, T, 2n) the belief the decoder reads."""
+        'gain' (B, T, k) diag K_t (1 at t = 0), 'h' (B, T, 2n) the belief the decoder reads and 'h_prior' (B, T-1, 2n)
+        the one-step prior's belief [z_{t|t-1}, log diag P_{t|t-1}]."""
         k = self.observed_dims
-        tr = self.filter_steps(w, r, return_gains=True, return_transition=True, return_prior=True, q_scale=q_scale)
+        tr = self.filter_steps(w, r, return_gains=True, return_transition=True, return_prior=True, q_scale=q_scale,
+                               gain=gain)
         return {"prior": tr["z_prior"][..., :k], "p_prior": tr["p_prior"][..., :k], "q": tr["q"][..., :k],
                 "gain": tr["gains"].diagonal(dim1=-2, dim2=-1)[..., :k],
-                "h": mean_and_log_variance(tr["z"], tr["p_diag"])}
+                "h": mean_and_log_variance(tr["z"], tr["p_diag"]),
+                "h_prior": mean_and_log_variance(tr["z_prior"], tr["p_prior"])}
 
     def belief_variance(self, h: torch.Tensor) -> torch.Tensor:
         """The log variances (..., n) of a belief h = [z, log diag P] (..., 2n)."""

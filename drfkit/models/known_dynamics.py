@@ -36,10 +36,10 @@ from typing import Any
 import torch
 from torch import nn
 
-from drfkit.core.filter import ekf_update
+from drfkit.core.filter import ekf_update, gain_update
 from drfkit.data import pendulum_physics as pend
 from drfkit.models.parts import IMAGE_DOWNSAMPLES, OUTPUT_LOG_R_RANGE, SIGMA_FLOOR, check_n_samples
-from drfkit.models.filtering import run_filter_loop, stack_steps
+from drfkit.models.filtering import run_filter_loop, select_forced, stack_steps
 from drfkit.models.sequence import SequenceModel, make_encoder
 from drfkit.models.spec import ModelSpec
 
@@ -187,9 +187,11 @@ class KnownDynamicsFilter(SequenceModel):
         P = torch.diag_embed(torch.stack([r0[:, 0], torch.full_like(theta, self.init_velocity_var)], -1))
         return x, P
 
-    def _step(self, x, P, w, r, q_scale: float = 1.0):
+    def _step(self, x, P, w, r, q_scale: float = 1.0, gain_t: torch.Tensor | None = None):
         """Predict with the true pendulum, update with (w, r) (B, 2): x, P, K (B, 2, 2), F and the prior
-        (x, P) before the update."""
+        (x, P) before the update. ``gain_t`` (B,) a forced gain (``drfkit.models.filtering``; NaN rows: the EKF's
+        own): K = g [H_theta; 0], the angle moved by g times the innovation's tangent component, the velocity not
+        updated (g = 0: the prediction alone), Joseph form (``gain_update``)."""
         step = pendulum_step if self.transition == "true" else self.learned
         theta, omega, F = step(x[:, 0], x[:, 1])
         prior = torch.stack([theta, omega], -1)
@@ -197,12 +199,21 @@ class KnownDynamicsFilter(SequenceModel):
         s, c = torch.sin(theta), torch.cos(theta)
         zero = torch.zeros_like(theta)
         H = torch.stack([torch.stack([-s, zero], -1), torch.stack([c, zero], -1)], -2)       # (B, 2, 2)
-        x, P, K = ekf_update(prior, p_prior, w - torch.stack([c, s], -1), H, r)
+        innovation = w - torch.stack([c, s], -1)
+        if gain_t is None or torch.isnan(gain_t).all():
+            x, P, K = ekf_update(prior, p_prior, innovation, H, r)
+        else:
+            g = torch.nan_to_num(gain_t, nan=0.0)
+            K_forced = torch.stack([torch.stack([-s * g, c * g], -1), torch.zeros_like(H[:, 0])], -2)   # (B, 2, 2)
+            forced = (*gain_update(prior, p_prior, innovation, H, r, K_forced), K_forced)
+            own = None if not torch.isnan(gain_t).any() else ekf_update(prior, p_prior, innovation, H, r)
+            x, P, K = select_forced(gain_t, forced, own)
         return x, P, K, F, (prior, p_prior)
 
     def filter_steps(self, w: torch.Tensor, r: torch.Tensor, return_gains: bool = False,
-                     return_prior: bool = False, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
-        """The EKF on w, r (B, T, 2). Always 'x' (B, T, 2) = (theta, omega) and 'p' (B, T, 2, 2).
+                     return_prior: bool = False, q_scale: float = 1.0,
+                     gain: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The EKF on w, r (B, T, 2); ``gain`` (B, T) a forced gain per frame (``_step``; NaN = the EKF's own). Always 'x' (B, T, 2) = (theta, omega) and 'p' (B, T, 2, 2).
         ``return_gains``: 'gains' K (B, T, 2, 2) (state x observation; t = 0: the start's, theta from w_0),
         'F' (B, T-1, 2, 2); ``return_prior``: 'x_prior' (B, T-1, 2), 'p_prior' (B, T-1, 2, 2)."""
         if w.ndim != 3 or w.shape[-1] != 2 or r.shape != w.shape:
@@ -218,8 +229,8 @@ class KnownDynamicsFilter(SequenceModel):
                 record["gains"] = eye
             return (x, P), record
 
-        def step(carry, w_t, r_t):
-            x, P, K, F, (prior, p_prior) = self._step(*carry, w_t, r_t, q_scale)
+        def step(carry, w_t, r_t, g_t=None):
+            x, P, K, F, (prior, p_prior) = self._step(*carry, w_t, r_t, q_scale, g_t)
             record = {"x": x, "p": P}
             if return_gains:
                 record["gains"], record["F"] = K, F
@@ -227,7 +238,7 @@ class KnownDynamicsFilter(SequenceModel):
                 record["x_prior"], record["p_prior"] = prior, p_prior
             return (x, P), record
 
-        first, steps = run_filter_loop(start, step, w, r)
+        first, steps = run_filter_loop(start, step, w, r, gain)
         b = w.shape[0]
         out = {"x": stack_steps(steps, "x", w.new_empty(b, 0, 2), first["x"]),
                "p": stack_steps(steps, "p", w.new_empty(b, 0, 2, 2), first["p"])}
@@ -266,9 +277,16 @@ class KnownDynamicsFilter(SequenceModel):
     def default_dropout_p(self) -> float:
         return 0.0
 
-    def forward_with_prior(self, inputs: torch.Tensor):
-        """(mean, sigma) of the posterior (B, T, 2) and of the one-step prior (B, T-1, 2)."""
-        tr = self.filter_steps(*self.observe(inputs), return_prior=True)
+    def forward(self, inputs: torch.Tensor, gain: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mean, sigma) (B, T, 2); ``gain`` (B, T) a forced gain per frame (``filter_steps``; None: the EKF's own)."""
+        if gain is None:
+            return super().forward(inputs)
+        tr = self.filter_steps(*self.observe(inputs), gain=gain)
+        return self.head(self.belief(tr["x"], tr["p"]))
+
+    def forward_with_prior(self, inputs: torch.Tensor, gain: torch.Tensor | None = None):
+        """(mean, sigma) of the posterior (B, T, 2) and of the one-step prior (B, T-1, 2); ``gain`` as ``forward``'s."""
+        tr = self.filter_steps(*self.observe(inputs), return_prior=True, gain=gain)
         return self.head(self.belief(tr["x"], tr["p"])), self.head(self.belief(tr["x_prior"], tr["p_prior"]))
 
     def filter_diagnostics(self, inputs: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -305,12 +323,13 @@ class KnownDynamicsFilter(SequenceModel):
         """The belief with its log variances replaced (the head's mean does not read them)."""
         return torch.cat([h[..., :3], log_var], -1)
 
-    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0) -> dict[str, torch.Tensor]:
-        """The EKF on w, r (B, T, 2) with Q times ``q_scale``, seen in the observation's space (``drfkit.methods.dissection``):
+    def filter_internals(self, w: torch.Tensor, r: torch.Tensor, q_scale: float = 1.0,
+                         gain: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The EKF on w, r (B, T, 2) with Q times ``q_scale`` and the forced ``gain`` (B, T) (NaN = its own), seen in the observation's space (``drfkit.methods.dissection``):
         'prior' (B, T-1, 2) h(f(x_{t-1})), 'p_prior' (B, T-1, 2) diag(H P_prior H^T), 'q' (B, T-1, 2)
         diag(H Q H^T), 'gain' (B, T, 2) diag(H K) (how much of an innovation reaches the estimate; 1 at
-        t = 0), 'h' the belief the head reads."""
-        tr = self.filter_steps(w, r, return_gains=True, return_prior=True, q_scale=q_scale)
+        t = 0), 'h' the belief the head reads and 'h_prior' (B, T-1, 5) the one-step prior's."""
+        tr = self.filter_steps(w, r, return_gains=True, return_prior=True, q_scale=q_scale, gain=gain)
         theta = tr["x_prior"][..., 0]
         s, c = torch.sin(theta), torch.cos(theta)
         tangent_sq = torch.stack([s * s, c * c], -1)                                          # diag(H e_theta e_theta^T H^T)
@@ -319,7 +338,7 @@ class KnownDynamicsFilter(SequenceModel):
         return {"prior": torch.stack([c, s], -1), "p_prior": tr["p_prior"][..., 0, 0].unsqueeze(-1) * tangent_sq,
                 "q": self.log_q[0].exp() * q_scale * tangent_sq,
                 "gain": torch.cat([torch.ones_like(w[:, :1]), gain], 1),
-                "h": self.belief(tr["x"], tr["p"])}
+                "h": self.belief(tr["x"], tr["p"]), "h_prior": self.belief(tr["x_prior"], tr["p_prior"])}
 
     # ---------------------------------------------------------------- streaming
     def initial_carry(self, frame: torch.Tensor):

@@ -29,7 +29,8 @@ from drfkit.data.noise import Noise
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
 from drfkit.methods.diagnostics import blackout_summary, diagnose
 from drfkit.methods.protocols import ABLATION_BUDGETS as BUDGETS
-from drfkit.methods.protocols import ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS, VARIANTS, summarise_ablation, variant_spec
+from drfkit.methods.protocols import (ROUND2_VARIANTS, ROUND3_VARIANTS, ROUND4_VARIANTS, ROUND5_VARIANTS, VARIANTS,
+                                      summarise_ablation, variant_spec)
 from drfkit.methods.run_config import TrainConfig, run_key
 from drfkit.methods.train import load_checkpoint, train_or_load
 from drfkit.models import default_config
@@ -40,7 +41,7 @@ from drfkit.util.io import atomic_write_json, param_hash
 from drfkit.util.paths import data_dir, results_dir
 
 EVAL_LEVELS = (0.5, 0.75, 1.0)
-ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS, 4: ROUND4_VARIANTS}
+ROUNDS = {2: ROUND2_VARIANTS, 3: ROUND3_VARIANTS, 4: ROUND4_VARIANTS, 5: ROUND5_VARIANTS}
 
 
 def budget_splits(P, budget_name: str, train_max_noise: float = 0.5, test_sequences: int = 0) -> PendulumSplits:

@@ -1,9 +1,10 @@
 """The dissection of the pendulum study's filters (``drfkit.methods.dissection``) on a profile's trained
-models: per noise level, how r, the prior variance and the gain compare with the errors they stand for,
-and what the filter gives with its gain clamped on a blackout or with a competent r out of distribution.
+models: per noise level, how r, the prior variance and the gain compare with the errors they stand for; the
+transition open loop (the gain forced to 0) by horizon beside hold; the gain clamped on the first k gap frames
+only; and the oracle gain at the highest noise and on the blackout.
 
-Every MAE here is the dropout-off output's. The r fit of intervention (b) reads the fit split (validation)
-at the training noise only; the scored split is another.
+Every MAE here is the dropout-off output's. Nothing reads another split: the oracle gain is an oracle on purpose
+(it reads the scored frames' errors), a yardstick of what the model's own transition and observations allow.
 """
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ from drfkit.study import studies
 from drfkit.study.dynamics import blackout_split, dropout_off_point
 from drfkit.util.progress import steps
 
+# (a3) the gain clamped on the first k gap frames: the first sequences of the scored split (enough for a curve)
+PARTIAL_CLAMP_SEQUENCES = 200
+
 
 def _prepared(model, arrays: dict[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """w, r (N, T, n) on the set's frames and the observed block's truth (N, T, k)."""
@@ -33,70 +37,134 @@ def _dropout_off_mae(model, arrays: dict[str, np.ndarray], frames: slice = slice
     return float(np.abs(mean.astype(np.float64) - arrays["targets"])[:, frames].mean())
 
 
-def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test", fit_split: str = "val"
-                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The dissection of every filter in ``models`` ((kind, seed) -> model; models without
-    ``filter_internals`` serve as the no_dynamics yardstick) on ``split`` at the training noise, at the
-    highest evaluation noise and on its blackout set; r of intervention (b) fit on ``fit_split`` at the
-    training noise.
+def _oracle_pass(model, arrays, prepared, trace) -> tuple[dict[str, np.ndarray], list[dict]]:
+    """(b) on one set: K* per level bin from the as-run ``trace``'s output-space errors, forced on every frame,
+    decoded with the as-run variances. Returns (the intervened trace, the K* rows)."""
+    targets = arrays["targets"].astype(np.float64)
+    obs = dis.observation_outputs(model, torch.from_numpy(arrays["images"]))
+    prior_err2 = np.square(trace["prior_mean"] - targets[:, 1:]).sum(-1)
+    obs_err2 = np.square(obs - targets).sum(-1)[:, 1:]
+    table = dis.oracle_gain_table(prior_err2, obs_err2, arrays["noise"])
+    w, r, truth = prepared
+    out = dis.filter_pass(model, w, r, truth, targets, log_var=trace["log_var"],
+                          gain=dis.oracle_gain(arrays["noise"], table))
+    return out, table
 
-    Returns (calibration, interventions). calibration: one row per (model, seed, set, level bin) of
-    ``dissection.calibration_table``, set in {'train', 'ood', 'blackout'}. interventions: one row per
-    filter (model, seed): mae_train, mae_ood, mae_blackout as the model is; mae_blackout_clamped (a), in
-    float64 (a diverging transition outgrows float32's covariance);
-    mae_ood_fitted_r and mae_ood_oracle_r (b), the fit's slope b (mean over dims); mae_ood_oracle_r_q (c)
-    with q_scale chosen on the fit split (e2_over_p_fit its prior calibration there); no_dynamics' mae_ood
-    (mean over its seeds, NaN without one) and the verdict of ``dissection.failure_verdict``."""
+
+def open_loop(model, prepared, targets: np.ndarray, as_run: dict[str, np.ndarray], start: int, stop: int
+              ) -> tuple[dict[str, np.ndarray], float]:
+    """(a1, a2) on one set: the gain forced to exactly 0 on frames [start, stop), in float64 (P of an expanding F
+    outgrows float32), decoded with the belief's variance held at start - 1, beside zero-order hold of the as-run
+    estimate there. Frames after the gap are not run: an expanding F leaves a P that no update can factor.
+    prepared: w, r, truth (N, T, ...); targets (N, T, 2); as_run: the model's own ``filter_pass`` on the set.
+    Returns ({'mae_clamped', 'angle_clamped', 'mae_hold', 'angle_hold'}: (stop - start,) by horizon, the largest
+    gain read back on the clamped frames (``check_clamped`` raises above its tolerance))."""
+    w, r, truth = prepared
+    gap = slice(0, stop)
+    clamp = dis.forced_gain((w.shape[0], stop), start, stop)
+    clamped = dis.filter_pass(model, w[:, gap], r[:, gap], truth[:, gap], targets[:, gap], float64=True, gain=clamp,
+                              log_var=dis.held_variance(as_run["log_var"][:, gap], start, stop))
+    worst = dis.check_clamped(clamped, clamp)
+    held = dis.hold(as_run["mean"], start, stop)
+    curve = {"mae_clamped": clamped["abs_err"], "angle_clamped": dis.angle_error(clamped["mean"], targets[:, gap]),
+             "mae_hold": np.abs(held - targets).mean(-1), "angle_hold": dis.angle_error(held, targets)}
+    return {name: dis.per_horizon(err, start, stop - start) for name, err in curve.items()}, worst
+
+
+def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test"
+                    ) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """The dissection of every filter in ``models`` ((kind, seed) -> model; models without ``filter_internals``
+    serve as the no_dynamics yardstick) on ``split`` at the training noise, at the highest evaluation noise and
+    on its blackout set (frames [start, stop) pure noise).
+
+    Returns (calibration, interventions, horizons, gains):
+    * calibration: one row per (model, seed, set, level bin) of ``dissection.calibration_table``, set in
+      {'train', 'ood', 'blackout'};
+    * horizons: one row per (model, seed, h = 1..15): the open-loop error with the gain forced to 0 from the gap's
+      first frame ('mae_clamped', 'angle_clamped'), zero-order hold of the last decoded estimate ('mae_hold',
+      'angle_hold'), the model as it runs on the blackout ('mae_as_run', 'angle_as_run') and on the same frames
+      without the blackout ('mae_as_run_ordinary'), the oracle gain on the blackout ('mae_oracle_gain'), the
+      verdict ('dissection.horizon_verdicts'), and (a3) 'mae_gap_partial': the gap's MAE with only its first h
+      frames clamped, the own gain after (first ``PARTIAL_CLAMP_SEQUENCES`` sequences; NaN where a transition that
+      expanded over the clamp left a covariance the own update cannot factor), 'mae_after_partial' the 15 frames
+      after the gap;
+    * interventions: one row per filter: mae_train, mae_ood, mae_blackout as the model runs; mae_blackout_clamped
+      (the gap's mean of mae_clamped) and mae_blackout_hold; clamped_gain_max (read back; an error above
+      ``dissection.GAIN_TOLERANCE``); open_loop_horizon H; mae_ood_oracle_gain, mae_blackout_oracle_gain;
+      verdict_blackout (the per-horizon verdicts as runs), verdict_ood ('gain' where the oracle gain beats the
+      model at the highest noise, else 'filtering'); no_dynamics' mae_ood (mean over its seeds, NaN without one);
+    * gains: one row per (model, seed, set in {'ood', 'blackout'}, level bin) of ``dissection.oracle_gain_table``
+      beside the model's own mean gain there ('model_gain', on its observed block)."""
     train_level = P.pendulum.train_max_noise
     ood_level = max(P.pendulum.eval_max_noise)
     sets = {"train": studies.pendulum_split(P, split, train_level),
             "ood": studies.pendulum_split(P, split, ood_level),
             "blackout": blackout_split(P, split)}
-    fit_set = studies.pendulum_split(P, fit_split, train_level)
-    start, stop = blackout_frames(sets["blackout"]["images"].shape[1])
+    dark = sets["blackout"]
+    start, stop = blackout_frames(dark["images"].shape[1])
+    targets = dark["targets"].astype(np.float64)
     nd = [_dropout_off_mae(m, sets["ood"]) for (kind, _), m in models.items() if kind == "no_dynamics"]
     nd_ood = float(np.mean(nd)) if nd else float("nan")
-    calibration, interventions = [], []
+    calibration, interventions, horizons, gains = [], [], [], []
     filters = {key: m for key, m in models.items() if hasattr(m, "filter_internals")}
     for (kind, seed), model in steps(filters.items(), "dissecting the filters", len(filters)):
-        k = model.observed_dims
         row: dict[str, Any] = {"model": kind, "seed": seed, "train_level": train_level, "ood_level": ood_level}
-        traces = {}
+        prepared, traces = {}, {}
         for name, arrays in sets.items():
-            w, r, truth = _prepared(model, arrays)
-            traces[name] = (w, r, truth, dis.filter_pass(model, w, r, truth, arrays["targets"]))
-            for cal in dis.calibration_table(traces[name][3], arrays["noise"]):
+            prepared[name] = _prepared(model, arrays)
+            traces[name] = dis.filter_pass(model, *prepared[name], arrays["targets"])
+            for cal in dis.calibration_table(traces[name], arrays["noise"]):
                 calibration.append({"model": kind, "seed": seed, "set": name, **cal})
-        row["mae_train"] = float(traces["train"][3]["abs_err"].mean())
-        row["mae_ood"] = float(traces["ood"][3]["abs_err"].mean())
-        row["mae_blackout"] = float(traces["blackout"][3]["abs_err"][:, start:stop].mean())
-        w, r, truth, _ = traces["blackout"]
-        clamped = dis.override_r(r, dis.clamp_frames((*r.shape[:2], k), start, stop), k)
-        held = dis.held_variance(traces["blackout"][3]["log_var"], start, stop)
-        row["mae_blackout_clamped"] = float(dis.filter_pass(model, w, clamped, truth, sets["blackout"]["targets"],
-                                                            log_var=held, float64=True)["abs_err"][:, start:stop].mean())
-        fw, fr, ftruth = _prepared(model, fit_set)
-        fit_trace = dis.filter_pass(model, fw, fr, ftruth, fit_set["targets"])
-        log_a, b = dis.fit_log_linear_r(fit_trace["obs_err2_dims"], fit_set["noise"], max_level=train_level)
-        own_scale = dis.r_scale(fit_trace, fr)                              # (k,) E[err^2] / E[r] on validation
-        w, r, truth, trace = traces["ood"]
-        noise = sets["ood"]["noise"]
-        oracle_r = dis.r_from_levels(trace["obs_err2_dims"], noise) / own_scale
-        for name, r_new in (("fitted_r", dis.r_from_fit(noise, log_a, b) / own_scale), ("oracle_r", oracle_r)):
-            out = dis.filter_pass(model, w, dis.override_r(r, r_new, k), truth, sets["ood"]["targets"],
-                                  log_var=trace["log_var"])
-            row[f"mae_ood_{name}"] = float(out["abs_err"].mean())
-        scale, ratio = dis.calibrate_q_scale(model, fw, fr, ftruth, fit_set["targets"])
-        out = dis.filter_pass(model, w, dis.override_r(r, oracle_r, k), truth, sets["ood"]["targets"], q_scale=scale,
-                              log_var=trace["log_var"])
-        row["mae_ood_oracle_r_q"] = float(out["abs_err"].mean())
-        row |= {"fitted_r_slope": float(np.mean(b)), "r_scale_fit": float(np.mean(own_scale)), "q_scale": scale,
-                "e2_over_p_fit": ratio,
+        row["mae_train"] = float(traces["train"]["abs_err"].mean())
+        row["mae_ood"] = float(traces["ood"]["abs_err"].mean())
+        row["mae_blackout"] = float(traces["blackout"]["abs_err"][:, start:stop].mean())
+        as_run = traces["blackout"]
+        w, r, truth = prepared["blackout"]
+        curve, row["clamped_gain_max"] = open_loop(model, prepared["blackout"], targets, as_run, start, stop)
+        curve |= {name: dis.per_horizon(err, start, stop - start) for name, err in (
+            ("mae_as_run", as_run["abs_err"]), ("angle_as_run", dis.angle_error(as_run["mean"], targets)),
+            ("mae_as_run_ordinary", traces["train"]["abs_err"]))}
+        # (b) the oracle gain at the highest noise and on the blackout
+        for name in ("ood", "blackout"):
+            out, table = _oracle_pass(model, sets[name], prepared[name], traces[name])
+            own_gain = traces[name]["gain"][:, 1:]
+            bins = dis.level_bins(sets[name]["noise"])[:, 1:]
+            for g in table:
+                b = np.iinfo(np.int32).max if g["level_lo"] >= 1.0 else int(round(g["level_lo"] / dis.LEVEL_BIN))
+                gains.append({"model": kind, "seed": seed, "set": name, **g,
+                              "model_gain": float(own_gain[bins == b].mean())})
+            if name == "ood":
+                row["mae_ood_oracle_gain"] = float(out["abs_err"].mean())
+            else:
+                row["mae_blackout_oracle_gain"] = float(out["abs_err"][:, start:stop].mean())
+                curve["mae_oracle_gain"] = dis.per_horizon(out["abs_err"], start, stop - start)
+        # (a3) only the first k gap frames clamped, the own gain after
+        few = slice(0, min(PARTIAL_CLAMP_SEQUENCES, w.shape[0]))
+        partial, after = [], []
+        for k in range(1, stop - start + 1):
+            gain = dis.forced_gain((few.stop, w.shape[1]), start, start + k)
+            try:
+                out = dis.filter_pass(model, w[few], r[few], truth[few], targets[few], float64=True, gain=gain,
+                                      log_var=dis.held_variance(as_run["log_var"][few], start, start + k,
+                                                                elsewhere=np.nan))
+            except ValueError:  # k expanding steps left a P that the own update cannot factor: NaN, not a number
+                partial.append(np.nan), after.append(np.nan)
+                continue
+            dis.check_clamped(out, gain)
+            partial.append(float(out["abs_err"][:, start:stop].mean()))
+            after.append(float(out["abs_err"][:, stop:stop + (stop - start)].mean()))
+        verdicts = dis.horizon_verdicts(curve["mae_clamped"], curve["mae_as_run"], curve["mae_hold"])
+        for h in range(stop - start):
+            horizons.append({"model": kind, "seed": seed, "h": h + 1, **{k: float(v[h]) for k, v in curve.items()},
+                             "mae_gap_partial": partial[h], "mae_after_partial": after[h], "verdict": verdicts[h]})
+        row |= {"mae_blackout_clamped": float(curve["mae_clamped"].mean()),
+                "mae_blackout_hold": float(curve["mae_hold"].mean()),
+                "open_loop_horizon": dis.open_loop_horizon(curve["mae_clamped"], curve["mae_hold"]),
+                "verdict_blackout": dis.verdict_runs(verdicts),
+                "verdict_ood": "gain" if row["mae_ood_oracle_gain"] < row["mae_ood"] else "filtering",
                 "no_dynamics_mae_ood": nd_ood}
-        row["failure"] = dis.failure_verdict(row["mae_blackout_clamped"], row["mae_ood_oracle_r"], nd_ood,
-                                             row["mae_ood_oracle_r_q"])
         interventions.append(row)
-    return pd.DataFrame(calibration), pd.DataFrame(interventions)
+    return pd.DataFrame(calibration), pd.DataFrame(interventions), pd.DataFrame(horizons), pd.DataFrame(gains)
 
 
 # the calibrated-gain screen's rule, written before its runs (docs/dynamics.md)
@@ -109,14 +177,18 @@ FAILED_SEED_SPEARMAN = 0.5
 
 
 def screen_variants(P, variants, seeds, budget_name: str = "fit", out=None, train_level: float = 0.5,
-                    per_seed: bool = False) -> pd.DataFrame:
+                    per_seed: bool = False, rule: str = "calibrated", reference_mae: float | None = None
+                    ) -> pd.DataFrame:
     """The calibrated-gain screen on VALIDATION data at the training noise only (levels <= ``train_level``;
     never 0.75 or a blackout): per trained (variant, seed) of the protocol ablation (``drfkit.study.ablation``,
     trained if missing) ``dissection.in_distribution_screen``; 'eligible' and 'chosen' by the rule:
     seed means with rho(log r, level) >= SCREEN_MIN_SPEARMAN and gain slope < 0 are eligible, the lowest
     MAE is chosen, MAEs within SCREEN_MAE_TIE of the lowest are a tie broken by the steeper gain slope.
     ``per_seed``: the rows per (variant, seed) instead, with 'failed' (rho < FAILED_SEED_SPEARMAN: a seed whose
-    r does not follow the noise, the known-dynamics filter's failure mode)."""
+    r does not follow the noise, the known-dynamics filter's failure mode). Every row also carries the open loop on
+    validation (updates skipped on the blackout's frames of ordinary frames: 'open_loop_horizon' H, 'mae_open_loop'
+    and hold's 'mae_open_loop_hold' over the 15 frames). ``rule='both_halves'`` judges by ``screen_both_halves``
+    against ``reference_mae`` (the yardstick's validation MAE, read from its own screen's table)."""
     from drfkit.methods.train import load_checkpoint
     from drfkit.study import ablation
     from drfkit.study.pendulum_runs import load_split
@@ -127,15 +199,28 @@ def screen_variants(P, variants, seeds, budget_name: str = "fit", out=None, trai
             res, run = ablation.train_variant(P, variant, seed, budget_name, out, progress=False)
             val = load_split(run.splits, "val", run.noise(train_level))
             model = load_checkpoint(res.best_path)
-            w, r, truth = _prepared(model, val)
-            trace = dis.filter_pass(model, w, r, truth, val["targets"])
+            prepared = _prepared(model, val)
+            trace = dis.filter_pass(model, *prepared, val["targets"])
+            # the open loop on ordinary validation frames: updates skipped on the blackout's frames, nothing noisier
+            start, stop = blackout_frames(val["targets"].shape[1])
+            curve, _ = open_loop(model, prepared, val["targets"].astype(np.float64), trace, start, stop)
             rows.append({"variant": variant, "seed": seed,
-                         **dis.in_distribution_screen(trace, val["noise"], max_level=train_level)})
+                         **dis.in_distribution_screen(trace, val["noise"], max_level=train_level),
+                         "open_loop_horizon": dis.open_loop_horizon(curve["mae_clamped"], curve["mae_hold"]),
+                         "mae_open_loop": float(curve["mae_clamped"].mean()),
+                         "mae_open_loop_hold": float(curve["mae_hold"].mean())})
     table = pd.DataFrame(rows)
     if per_seed:  # each seed's row, and whether its r fails to follow the noise in distribution
         return table.assign(failed=table["r_level_spearman"] < FAILED_SEED_SPEARMAN)
     means = table.groupby("variant", sort=False).mean(numeric_only=True).drop(columns="seed")
-    return screen_choice(means.join(table.groupby("variant", sort=False).size().rename("n_seeds"))).reset_index()
+    means = means.join(table.groupby("variant", sort=False).size().rename("n_seeds"))
+    if rule == "both_halves":
+        if reference_mae is None or not reference_mae > 0:
+            raise ValueError(f"the both-halves rule needs the yardstick's validation MAE (> 0), got {reference_mae!r}")
+        return screen_both_halves(means, reference_mae).reset_index()
+    if rule != "calibrated":
+        raise ValueError(f"rule must be 'calibrated' or 'both_halves', got {rule!r}")
+    return screen_choice(means).reset_index()
 
 
 def restart_check(P, kind: str, protocol: str = "book") -> pd.DataFrame:
@@ -182,6 +267,31 @@ def screen_choice(means: pd.DataFrame) -> pd.DataFrame:
     return means
 
 
+# the fifth round's rule, written before its runs (docs/dynamics.md): the candidate keeps the calibrated gain, fits the
+# mean within this factor of the reference (the book's calibrated-gain DRF on the same budget), and then predicts
+# open loop the longest; horizons within BOTH_HALVES_H_TIE frames are a tie, broken by the lower MAE
+BOTH_HALVES_MAE_RATIO = 1.5
+BOTH_HALVES_H_TIE = 1.0
+
+
+def screen_both_halves(means: pd.DataFrame, reference_mae: float) -> pd.DataFrame:
+    """The fifth round's rule on seed means indexed by variant (r_level_spearman, gain_slope, mae,
+    open_loop_horizon): eligible, a variant with rho(log r, level) >= SCREEN_MIN_SPEARMAN, a gain slope < 0 and an
+    MAE <= BOTH_HALVES_MAE_RATIO x ``reference_mae`` (the yardstick's, on the same validation split and budget);
+    chosen, the eligible one with the largest open-loop horizon, horizons within BOTH_HALVES_H_TIE a tie broken by
+    the lower MAE; when none is eligible, none is chosen (the failure is recorded, docs/dynamics.md)."""
+    means = means.copy()
+    means["mae_bound"] = BOTH_HALVES_MAE_RATIO * float(reference_mae)
+    means["eligible"] = ((means["r_level_spearman"] >= SCREEN_MIN_SPEARMAN) & (means["gain_slope"] < 0)
+                         & (means["mae"] <= means["mae_bound"]))
+    means["chosen"] = False
+    pool = means[means["eligible"]]
+    if len(pool):
+        tied = pool[pool["open_loop_horizon"] >= pool["open_loop_horizon"].max() - BOTH_HALVES_H_TIE]
+        means.loc[tied["mae"].idxmin(), "chosen"] = True
+    return means
+
+
 def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     """Per (model, set): the calibration ratios and the gain over the set's frames, mean over seeds and
     level bins weighted by frames -- the dissection's table in one screen."""
@@ -193,5 +303,5 @@ def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
 
 
-__all__ = ["FAILED_SEED_SPEARMAN", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters",
+__all__ = ["BOTH_HALVES_H_TIE", "BOTH_HALVES_MAE_RATIO", "FAILED_SEED_SPEARMAN", "open_loop", "screen_both_halves", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters",
            "restart_check", "screen_choice", "screen_variants"]

@@ -36,11 +36,12 @@ def evaluate_model(model, data: SequenceData, *, n_samples: int, dropout_p: floa
 
 
 def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_rates, level: float = 0.95,
-                         batch_size: int = EVAL_BATCH_SIZE, device=None, seed: int | None = None, cache=None
-                         ) -> list[dict[str, float]]:
+                         batch_size: int = EVAL_BATCH_SIZE, device=None, seed: int | None = None, cache=None,
+                         sigma_scale: float = 1.0) -> list[dict[str, float]]:
     """``evaluate_model`` at several dropout rates; the encoder and filter run once. With a
     ``seed`` the dropout masks are seeded here and the prediction may come from ``cache``
-    (``drfkit.methods.predictions``); without one the caller's random state is used."""
+    (``drfkit.methods.predictions``); without one the caller's random state is used. ``sigma_scale``: every
+    predictive sigma times this number (a recalibration, ``drfkit.methods.calibration``; 1 = as trained)."""
     from drfkit.methods.uncertainty import predict_rates
 
     if seed is None:
@@ -51,7 +52,7 @@ def evaluate_model_rates(model, data: SequenceData, *, n_samples: int, dropout_r
                                      dropout_rates=dropout_rates, seed=seed, batch_size=batch_size, device=device)
     out = []
     for pred in preds:
-        m = prediction_metrics(pred.mean, pred.total, data.targets, data.mask, level, point=pred.point)
+        m = prediction_metrics(pred.mean, pred.total * sigma_scale, data.targets, data.mask, level, point=pred.point)
         m["aleatoric"] = float(pred.aleatoric.mean())
         m["epistemic"] = float(pred.epistemic.mean())
         out.append(m)
@@ -104,14 +105,16 @@ def summarise(frame: pd.DataFrame, by: Iterable[str], values: Iterable[str] = ME
 
 
 def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: Iterable[float | None] = (None,),
-                   models: dict | None = None, sequences: dict[float, int] | None = None) -> pd.DataFrame:
+                   models: dict | None = None, sequences: dict[float, int] | None = None,
+                   sigma_scales: dict[tuple[str, int], float] | None = None) -> pd.DataFrame:
     """Every trained (model, seed) of ``study`` at every test noise level and dropout rate.
 
     Returns one row per (model, seed, noise, dropout_p) with all ``METRICS`` (PICP as a
     fraction) and 'sequences', the test sequences evaluated. ``dropout_p = None`` means each model's own training
     rate. ``sequences`` (level -> N): evaluate that level on the first N test sequences only (a sweep's levels that no
     claim reads); every other level on all. A level named twice is refused (its rows would count every seed
-    twice). Test sets are built by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
+    twice). ``sigma_scales`` ((kind, seed) -> s): every sigma of that model times s (``uncertainty_scales``: the
+    intervals recalibrated on validation; the rows then carry 'sigma_scale'). Test sets are built by ``drfkit.study.studies`` with the same motions / pedestrians at every noise level.
     """
     from drfkit.study import studies
 
@@ -127,11 +130,13 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
         for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
             results = evaluate_model_rates(model, data, n_samples=P.uncertainty.n_samples, dropout_rates=list(dropout_rates),
                                            level=P.uncertainty.interval_level, device=device, seed=seed,
-                                           cache=predictions_dir(P.profile))
+                                           cache=predictions_dir(P.profile),
+                                           sigma_scale=1.0 if sigma_scales is None else sigma_scales[(kind, seed)])
             for p, m in zip(dropout_rates, results):
                 rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
                              "dropout_p": model.default_dropout_p if p is None else float(p), **m,
-                             "sequences": len(data)})
+                             "sequences": len(data)}
+                            | ({} if sigma_scales is None else {"sigma_scale": sigma_scales[(kind, seed)]}))
     return pd.DataFrame(rows)
 
 
@@ -157,16 +162,66 @@ def calibration_points(P, study: str, noise_levels: Iterable[float], models: dic
     noise_levels = list(noise_levels)
     for noise in steps(noise_levels, f"{study}: calibration at {len(noise_levels)} test levels"):
         data = studies.study_data(P, study, "test", noise)
-        mask = None
-        if data.mask is not None:
-            mask = np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
+        mask = _value_mask(data)
         for (kind, seed), model in models.items():
-            # evaluate_model_rates' batch size: the same cache entry as the evaluation's pass at this level
-            pred = cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
-                                        dropout_rates=[None], seed=seed, batch_size=EVAL_BATCH_SIZE, device=device)[0]
+            pred = _prediction(P, model, data, seed, device)  # the evaluation's cache entry at this level
             expected, observed = metrics.calibration_curve(data.targets, pred.mean, pred.total, mask=mask)
             rows += [{"study": study, "model": kind, "seed": seed, "noise": float(noise), "expected": e,
                       "observed": o} for e, o in zip(expected, observed)]
     frame = pd.DataFrame(rows)
     return (frame.groupby(["study", "model", "noise", "expected"], as_index=False)["observed"]
             .agg(observed="mean", observed_sd="std"))
+
+
+def _prediction(P, model, data: SequenceData, seed: int, device):
+    """The model's own-rate prediction of ``data``, from the evaluation's cache entry when it exists."""
+    return cached_predict_rates(model, data.inputs, cache=predictions_dir(P.profile), n_samples=P.uncertainty.n_samples,
+                                dropout_rates=[None], seed=seed, batch_size=EVAL_BATCH_SIZE, device=device)[0]
+
+
+def _value_mask(data: SequenceData):
+    return None if data.mask is None else np.broadcast_to(data.mask.numpy()[..., None], data.targets.shape)
+
+
+def uncertainty_scales(P, study: str, models: dict, protocol: str = "paper") -> dict[tuple[str, int], float]:
+    """(kind, seed) -> s: the one-scalar recalibration of each model's predictive sigma (MC dropout at its own
+    rate, ``drfkit.methods.calibration.sigma_scale``), fitted on the VALIDATION split at the training noise only."""
+    from drfkit.methods.calibration import sigma_scale
+    from drfkit.study import studies
+
+    val = studies.study_data(P, study, "val", protocol=protocol)
+    device = studies.pick_device(P.device)
+    out = {}
+    for (kind, seed), model in models.items():
+        pred = _prediction(P, model, val, seed, device)
+        out[(kind, seed)] = sigma_scale(val.targets.numpy(), pred.mean.numpy(), pred.total.numpy(), _value_mask(val))
+    return out
+
+
+def calibration_table(P, study: str, noise_levels: Iterable[float], models: dict, scales: dict[tuple[str, int], float],
+                      sequences: dict[float, int] | None = None) -> pd.DataFrame:
+    """The primary uncertainty table: per (model, seed, noise, intervals) the coverage at the nominal 68 / 90 / 95 %
+    levels, their widths, the NLL and the calibration error (``drfkit.methods.calibration.calibration_summary``) of
+    the MC-dropout predictive Gaussian at the model's own rate, 'as trained' and 'recalibrated' (every sigma times
+    the model's validation ``scales``); beside them the dropout-off MAE and RMSE and the mean aleatoric and
+    epistemic sigma. ``sequences`` as ``evaluate_study``'s (the same cache entries)."""
+    from drfkit.methods.calibration import calibration_summary
+    from drfkit.study import studies
+
+    device = studies.pick_device(P.device)
+    rows = []
+    levels = [float(v) for v in noise_levels]
+    for noise in steps(levels, f"{study}: calibration at {len(levels)} test levels"):
+        data = first_sequences(studies.study_data(P, study, "test", noise), (sequences or {}).get(noise))
+        mask, y = _value_mask(data), data.targets.numpy()
+        for (kind, seed), model in models.items():
+            pred = _prediction(P, model, data, seed, device)
+            point = pred.point.numpy()
+            err = (point - y) if mask is None else (point - y)[mask]
+            base = {"study": study, "model": kind, "seed": seed, "noise": noise, "mae": float(np.abs(err).mean()),
+                    "rmse": float(np.sqrt(np.mean(np.square(err)))),
+                    "aleatoric": float(pred.aleatoric.mean()), "epistemic": float(pred.epistemic.mean())}
+            for name, s in (("as trained", 1.0), ("recalibrated", scales[(kind, seed)])):
+                rows.append(base | {"intervals": name} | calibration_summary(y, pred.mean.numpy(), pred.total.numpy(),
+                                                                           mask, scale=s))
+    return pd.DataFrame(rows)

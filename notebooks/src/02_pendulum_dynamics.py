@@ -456,45 +456,59 @@ protocols.groupby(["protocol", "model"], sort=False).mean(numeric_only=True).dro
 # each variance with the error it stands for, per noise level: E[err²] / E[r] for the observation
 # (err = w_t − x_t) and E[e²] / E[P̂] for the one-step prior (e = F z_{t−1} − x_t), x_t the truth in the
 # observation's space (the true (cos θ, sin θ) for the known-dynamics filter, the encoder's code of the same
-# frame without noise for a latent DRF); a ratio far below 1 is a variance far above its error. Then it
-# intervenes on the same filter, nothing retrained: (a) the gain clamped to ≈ 0 on the blackout frames (can
-# the transition coast?), (b) a competent r at the out-of-distribution level (a log-linear law in the level
-# fit on validation frames of the training levels, and the oracle: each level's own error variance), (c) the
-# oracle r with q scaled to the value whose prior variance matches its error on validation. The rule, written
-# before the measurement (`dissection.failure_verdict`, docs/dynamics.md): the failure is the **gain**'s if (a)
-# coasts (blackout MAE ≤ 0.10) and (b) brings the MAE at the highest noise to half of no_dynamics' or less;
-# the **prior variance**'s if only (c) does; otherwise the **transition**'s. Every MAE is the dropout-off one.
+# frame without noise for a latent DRF); a ratio far below 1 is a variance far above its error.
+#
+# Then it intervenes on the filter's **gain**, a flag of the step (nothing retrained, the same observations):
+# (a1) the gain forced to exactly 0 on the blackout's 15 frames, so z_t = F_t z_{t−1} and P_t = F P Fᵀ + Q (the
+# gain is read back and anything above 1e-6 stops the run; a large r is no clamp where F expands, because P then
+# grows until P / (P + r) reads the frames again); (a2) the resulting open-loop error by horizon h = 1..15 in
+# output space, beside zero-order hold of the last estimate, and the horizon H over which the transition beats
+# hold and stays ≤ 0.10; (a3) the gain clamped on the first k gap frames only, the model's own gain after; (b) an
+# oracle gain per level bin, K* = e²/(e² + err²), from output-space errors of the prior and of the observation
+# decoded alone. The rule per horizon, written before the measurement (`dissection.horizon_verdicts`,
+# docs/dynamics.md): **gain** where the clamped error is below the model's as it runs, **transition** where it
+# beats neither hold nor the model as it runs, else **filtering**. Every MAE is the dropout-off one.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
 from drfkit.study import dissection
 
-calibration, interventions = [], []
-for name, trained_models in protocol_models.items():
-    cal, inter = cached(P.profile, dissection.dissect_filters, P, trained_models, timing=False)
-    calibration.append(cal.assign(protocol=name))
-    interventions.append(inter.assign(protocol=name))
-calibration = pd.concat(calibration, ignore_index=True)
-interventions = pd.concat(interventions, ignore_index=True)
+parts = {name: cached(P.profile, dissection.dissect_filters, P, trained_models, timing=False)
+         for name, trained_models in protocol_models.items()}
+calibration, interventions, horizons, oracle_gains = (
+    pd.concat([p[i].assign(protocol=name) for name, p in parts.items()], ignore_index=True) for i in range(4))
 save_table(P.profile, "pendulum_dissection_calibration", calibration)
 save_table(P.profile, "pendulum_dissection", interventions)
+save_table(P.profile, "pendulum_dissection_horizons", horizons)
+save_table(P.profile, "pendulum_dissection_oracle_gain", oracle_gains)
 (calibration.groupby("protocol", sort=False)
  .apply(dissection.calibration_summary, include_groups=False).round(4))
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-interventions[["protocol", "model", "seed", "mae_train", "mae_ood", "mae_blackout", "mae_blackout_clamped",
-               "mae_ood_fitted_r", "mae_ood_oracle_r", "mae_ood_oracle_r_q", "no_dynamics_mae_ood", "failure"]].round(4)
+interventions[["protocol", "model", "seed", "mae_ood", "mae_ood_oracle_gain", "mae_blackout", "mae_blackout_clamped",
+               "mae_blackout_hold", "mae_blackout_oracle_gain", "open_loop_horizon", "clamped_gain_max",
+               "verdict_blackout", "verdict_ood"]].round(4)
 
 # %% [markdown]
-# How to read the two tables. A gain near 1 on clean and pure-noise frames alike, with E[err²] / E[r] of
-# hundreds on the out-of-distribution sets, is an r that does not rise with frames worse than any seen in
-# training; E[e²] / E[P̂] far from 1 is a transition whose variance misstates its error. The interventions
-# then separate the two: a clamped-gain blackout MAE far above 0.10 is a transition that cannot carry the
-# state even when told to ignore the frames (a latent state that grows without bound shows as an MAE far
-# above 1), and a competent r that does not lower the MAE at the highest noise is a transition whose
-# prediction is no better than the frames it would replace. docs/dynamics.md quotes the paper profile's
-# numbers and verdicts.
+# The open loop by horizon (seed means): the clamped filter's error against hold and the model as it runs
+# through the blackout, and the gap's MAE when only its first k frames are clamped. A clamped curve below hold
+# and under 0.10 is a transition that predicts; a partial-clamp curve that falls with k is a model whose own gain
+# reads the noise frames once the clamp lifts (a gain failure), one that rises with k a transition that drifts.
+
+# %%
+from drfkit.report.open_loop import plot_open_loop
+
+fig = plot_open_loop(horizons)
+save_figure(P.profile, "pendulum_open_loop", fig)
+
+# %% [markdown]
+# How to read the tables. A gain near 1 on clean and pure-noise frames alike, with E[err²] / E[r] of hundreds
+# on the out-of-distribution sets, is an r that does not rise with frames worse than any seen in training;
+# E[e²] / E[P̂] far from 1 is a transition whose variance misstates its error. The interventions separate the
+# two halves of a filter: the open-loop horizon says whether the transition can carry the state at all, and the
+# oracle gain (its K* per level beside the model's own gain in `pendulum_dissection_oracle_gain`) how far the
+# model's gain is from the one its errors call for. docs/dynamics.md quotes the paper profile's numbers.
 
 # %% [markdown]
 # Each protocol's true-physics reference, on its own no_dynamics (seed means; the blackout's over the

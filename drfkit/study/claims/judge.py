@@ -64,7 +64,8 @@ def _matched_monoloco(P) -> tuple[pd.DataFrame | None, pd.DataFrame | None, str]
 
 @dataclass
 class OodTables:
-    """What C1-C5 read (notebook 04): the summary, per-seed rows and PICP–MPIW curves of every study in
+    """What C1-C5 read (notebook 04): the summary, per-seed rows and PICP–MPIW curves (intervals recalibrated on
+    validation, ``drfkit.study.evaluate.uncertainty_scales``) of every study in
     the profile's evaluation, each study's protocols, paper levels, shifted levels and baselines, and
     notebook 03's input-matched Monoloco (summary, per-seed rows, a note on its interval)."""
 
@@ -105,7 +106,10 @@ class OodTables:
 
 def ood_tables(P) -> OodTables | None:
     """Notebook 04's inputs of C1-C5 for the studies its summary holds; None until it has written all three tables."""
-    summary, evals, curves = (_read(P, n) for n in ("ood_all_metrics", "ood_all_metrics_by_seed", "ood_picp_mpiw"))
+    # C2 and C5 rank intervals recalibrated on validation (one scale per model and seed): as trained, every learned
+    # model's intervals are several times too wide in distribution, and coverage would rank their excess width
+    summary, evals, curves = (_read(P, n) for n in ("ood_all_metrics", "ood_all_metrics_by_seed",
+                                                   "ood_picp_mpiw_recalibrated"))
     if summary is None or evals is None or curves is None:
         return None
     studies = [s for s in P.evaluation.studies if (summary["study"] == s).any()]
