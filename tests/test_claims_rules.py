@@ -403,3 +403,31 @@ def test_c5_compares_the_pedestrians_with_the_input_matched_monoloco(monkeypatch
     assert "vs monoloco_detected_inputs: 0%" in row["ours"] and "vs monoloco:" not in row["ours"]
     assert row["verdict"] == claims.NOT
     assert c5.judge(SimpleNamespace(**{**vars(ood), "matched": None}))[0][1]["verdict"] == claims.REPRODUCED
+
+
+def test_c4s_rule_text_is_written_from_the_constants_its_verdict_applies():
+    from drfkit.study.claims import c4_pedestrian_parity as c4
+
+    text = c4.parity_rule()
+    assert "above +10 % and at most +25 %" in text and "inside +/- 10 %" in text and "nominal" in text
+    assert "+25 %" not in c4.parity_rule(partly_max=0.3) and "+30 %" in c4.parity_rule(partly_max=0.3)
+    # the verdict flips where the text says it does
+    v = lambda lo, hi: c4.parity_verdict((lo + hi) / 2, ((lo + hi) / 2, lo, hi))  # noqa: E731
+    assert v(-0.0999, 0.0999) == claims.REPRODUCED and v(-0.1001, 0.0999) == claims.INCONCLUSIVE
+    assert v(0.1001, 0.25) == claims.PARTLY and v(0.1001, 0.2501) == claims.NOT and v(0.0999, 0.25) == claims.INCONCLUSIVE
+    assert v(-0.3, -0.1001) == claims.BETTER
+
+
+def test_c4_says_which_model_is_more_accurate_when_the_interval_excludes_0():
+    import pandas as pd
+
+    from drfkit.study.claims import c4_pedestrian_parity as c4
+
+    mae = pd.DataFrame([{"model": "drf", "noise": 0.01, "mae": 1.1}, {"model": claims.MATCHED_MONOLOCO, "noise": 0.01,
+                                                                       "mae": 1.0}])
+    by_seed = pd.DataFrame([{"model": m, "seed": s, "noise": 0.01, "mae": v} for s, (a, b) in
+                            enumerate([(1.10, 1.0), (1.12, 1.0), (1.05, 1.0)])
+                            for m, v in (("drf", a), (claims.MATCHED_MONOLOCO, b))])
+    row = c4.c4_in_distribution_parity(mae, 0.01, by_seed=by_seed)
+    assert row["verdict"] == claims.INCONCLUSIVE
+    assert "the interval excludes 0: Monoloco" in row["ours"] and "is more accurate than DRF" in row["ours"]

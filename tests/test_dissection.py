@@ -323,6 +323,16 @@ def test_the_screen_command_judges_trained_variants_on_validation_only(tmp_path,
     assert re.search(r"fit_calibrated_wide: [01] of 1 seeds fail", printed) and "failed" in printed
     rows = pd.read_csv(out)  # the first call's table is untouched by a call without --csv
     assert len(rows) == 1
+    assert {"open_loop_horizon", "mae_open_loop", "mae_open_loop_hold"} <= set(rows)   # the open loop on validation
+    # the fifth round's rule: its yardstick must be a row of the profile's calibrated-gain screen
+    assert cli(["screen", "--budget", "fit_tiny", "--variants", "fit_calibrated_basis_skip_wide", "--seeds", "0",
+                "--out", str(tmp_path), "--rule", "both_halves", "--reference", "nope"]) == 2
+    assert "pendulum_calibrated_screen.csv" in capsys.readouterr().out
+    assert cli(["screen", "--budget", "fit_tiny", "--variants", "fit_calibrated_basis_skip_wide", "--seeds", "0",
+                "--out", str(tmp_path), "--rule", "both_halves", "--reference", "fit_calibrated_prior_wide",
+                "--csv", str(out)]) == 0
+    both = pd.read_csv(out)
+    assert both["variant"].tolist() == ["fit_calibrated_basis_skip_wide"] and {"mae_bound", "eligible"} <= set(both)
 
 
 def test_the_gating_study_gates_the_papers_drf_only():

@@ -273,3 +273,39 @@ def test_a_regulariser_reaches_its_own_parameters_only():
     reached = {n for n, p in model.named_parameters() if p.grad is not None and p.grad.abs().sum() > 0}
     assert reached and all(n.startswith("learned.") for n in reached)
     assert "learned.outer.weight" in reached
+
+
+def test_skip_spans_skip_one_span_of_the_asked_lengths_never_the_start_in_the_asked_share():
+    from drfkit.methods.objectives import skip_spans
+
+    g = skip_spans(4000, 25, [1, 20], 0.5, torch.Generator().manual_seed(0))
+    forced = ~torch.isnan(g)
+    assert torch.all(g[forced] == 0) and not forced[:, 0].any()            # gain 0 where forced, never at frame 0
+    lengths = forced.sum(1)
+    used = lengths > 0
+    assert abs(used.float().mean().item() - 0.5) < 0.03                      # half the windows
+    assert lengths[used].min() >= 1 and lengths[used].max() <= 20
+    starts = forced.float().argmax(1)[used]
+    contiguous = (forced[used].float().diff(dim=1).abs().sum(1) <= 2)        # one span: at most one rise and one fall
+    assert contiguous.all() and (starts >= 1).all()
+    short = skip_spans(10, 6, [1, 20], 1.0, torch.Generator().manual_seed(1))  # spans cut to T - 1
+    assert (~torch.isnan(short)).sum(1).max() <= 5 and not (~torch.isnan(short[:, 0])).any()
+
+
+def test_skipped_updates_need_a_filter_and_reach_the_loss():
+    from drfkit.methods.objectives import batch_loss
+    from drfkit.models import build_model, default_config
+
+    torch.manual_seed(0)
+    x = torch.randint(0, 256, (2, 6, 24, 24), dtype=torch.uint8)
+    y = torch.zeros(2, 6, 2)
+    gain = torch.full((2, 6), float("nan"))
+    gain[:, 2:5] = 0.0
+    nd = build_model(default_config("no_dynamics", "pendulum", 2))
+    with pytest.raises(ValueError, match="skip_spans"):
+        batch_loss(nd, "nll", 1.0, x, y, gain=gain)
+    drf = build_model(default_config("drf", "pendulum", 2, latent=4)).eval()
+    own, skipped = (batch_loss(drf, "nll", 1.0, x, y, prior_weight=1.0, gain=g) for g in (None, gain))
+    assert torch.isfinite(skipped) and not torch.isclose(own, skipped)
+    skipped.backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in drf.transition.parameters())

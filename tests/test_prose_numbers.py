@@ -100,16 +100,17 @@ def test_the_book_protocol_table_in_docs_is_the_committed_rows():
 
 
 def dissection_lines(t: pd.DataFrame) -> list[str]:
-    """docs/dynamics.md's verdict lines, rendered from tables/pendulum_dissection.csv."""
+    """docs/dynamics.md's dissection lines, rendered from tables/pendulum_dissection.csv (per seed)."""
     lines = []
+    f2, f3 = (lambda col: ", ".join(f"{v:.2f}" for v in col)), (lambda col: ", ".join(f"{v:.3f}" for v in col))
     for (protocol, model), g in t.groupby(["protocol", "model"], sort=False):
         g = g.sort_values("seed")
-        verdicts = g["failure"].unique()
-        assert len(verdicts) == 1, f"{protocol} {model}: the seeds' verdicts differ ({verdicts}); say so in the docs"
-        lines.append(f"* {protocol} protocol, `{model}`: **{verdicts[0]}**. Clamped-gain blackout MAE "
-                     + ", ".join(f"{v:.2f}" for v in g["mae_blackout_clamped"])
-                     + "; at 0.75 as it is " + ", ".join(f"{v:.3f}" for v in g["mae_ood"])
-                     + ", with the oracle r " + ", ".join(f"{v:.3f}" for v in g["mae_ood_oracle_r"]) + ".")
+        lines.append(f"* {protocol} protocol, `{model}`: open-loop horizon H "
+                     + ", ".join(str(int(v)) for v in g["open_loop_horizon"])
+                     + "; blackout with the gain 0 " + f3(g["mae_blackout_clamped"]) + " (hold " + f3(g["mae_blackout_hold"])
+                     + ", as it runs " + f2(g["mae_blackout"]) + ", oracle gain " + f3(g["mae_blackout_oracle_gain"])
+                     + "); at 0.75 as it runs " + f3(g["mae_ood"]) + ", oracle gain " + f3(g["mae_ood_oracle_gain"])
+                     + ". Verdicts: " + "; ".join(g["verdict_blackout"]) + ".")
     return lines
 
 

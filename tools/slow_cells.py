@@ -1,4 +1,5 @@
-"""Where a run's time went: each notebook's total and every cell slower than a threshold, as markdown.
+"""Where a run's time went: each notebook's total (wall and CPU seconds, the cores it kept busy) and every cell
+slower than a threshold, as markdown.
 
     .venv/bin/python tools/slow_cells.py results/paper [--over 30]
 
@@ -26,14 +27,20 @@ def slow_cells(results: Path, over: float = 30.0) -> str:
     manifest = json.loads(manifest_path.read_text())
     pipeline, git = manifest["pipeline"], manifest["environment"].get("git", {})
     durations = pipeline["durations_s"]
+    cpu, cores = pipeline.get("cpu_s") or {}, pipeline.get("cores")  # runs before CPU was recorded have neither
     cells = pd.read_csv(cells_path)
     total = sum(durations.values())
     lines = [f"commit {git.get('commit', '?')[:7]}{' (dirty)' if git.get('dirty') else ''}, "
-             f"started {pipeline.get('started', '?')}, total {total:,.0f} s ({total / 60:.0f} min)", "",
-             "| notebook | seconds | share | cells over %g s |" % over, "|---|---|---|---|"]
+             f"started {pipeline.get('started', '?')}, total {total:,.0f} s ({total / 60:.0f} min)"
+             + (f", {cores} cores" if cores else ""), "",
+             "| notebook | seconds | share | CPU seconds | cores used | cells over %g s |" % over,
+             "|---|---|---|---|---|---|"]
     for name, seconds in durations.items():
         n_slow = int(((cells["notebook"] == name) & (cells["seconds"] > over)).sum())
-        lines.append(f"| {name} | {seconds:,.0f} | {seconds / total:.0%} | {n_slow} |")
+        used = cpu.get(name)
+        cpu_cells = ("| | " if used is None else
+                     f"| {used:,.0f} | {used / seconds:.2f}" + (f" of {cores}" if cores else "") + " ")
+        lines.append(f"| {name} | {seconds:,.0f} | {seconds / total:.0%} {cpu_cells}| {n_slow} |")
     lines += ["", "| notebook | cell | seconds | first line |", "|---|---|---|---|"]
     slow = cells[cells["seconds"] > over].sort_values(["notebook", "cell"])
     for row in slow.itertuples():

@@ -150,12 +150,14 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
     previous, finished = {}, {}  # read under the lock, after a killed run was undone
     started, t0 = now_iso(), time.perf_counter()
     durations: dict[str, float] = {}
+    cpu: dict[str, float] = {}  # user + system CPU seconds per notebook (its kernel and every process it waited for)
 
     def record(status: str, finished_at: str | None = None) -> None:
         update_manifest(profile_name, profile_file=str(profile), profile_values=values, overrides=overrides or {},
                         pipeline={"started": started, "finished": finished_at, "status": status,
                                   "total_s": round(time.perf_counter() - t0, 1) if finished_at else None,
-                                  "durations_s": durations, "notebooks": names, "finished_notebooks": finished})
+                                  "durations_s": durations, "cpu_s": cpu, "cores": os.cpu_count(),
+                                  "notebooks": names, "finished_notebooks": finished})
 
     with exclusive_lock(root / PIPELINE_LOCK, f"profile {profile_name} (results {root})", announce_stale=True):
         recover_after_kill(root, profile_name)
@@ -164,7 +166,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
         os.environ[PIPELINE_ENV] = str(root.resolve())  # the notebooks' kernels run under this lock
         try:
             return _run_locked(profile, profile_name, names, per_notebook, values, overrides, kernel, pm,
-                               root, out_dir, previous, finished, started, t0, durations, record)
+                               root, out_dir, previous, finished, started, t0, durations, record, cpu)
         finally:
             os.environ.pop(PIPELINE_ENV, None)
 
@@ -216,8 +218,18 @@ def recover_after_kill(root: Path, profile_name: str) -> str | None:
     return name
 
 
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of every child it has waited for (a notebook's kernel, and the
+    processes the kernel waited for: Dask workers, data loaders), so far: the difference over a notebook is what it
+    used of the machine's cores."""
+    import resource
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def _run_locked(profile, profile_name, names, per_notebook, values, overrides, kernel, pm, root, out_dir,
-                previous, finished, started, t0, durations, record) -> int:
+                previous, finished, started, t0, durations, record, cpu) -> int:
     record("running")
     handlers = {sig: signal.signal(sig, _raise_interrupted) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
@@ -229,7 +241,7 @@ def _run_locked(profile, profile_name, names, per_notebook, values, overrides, k
                 continue
             finished.pop(name, None)
             print(f"== {name} ({profile_name})", flush=True)
-            t = time.perf_counter()
+            t, cpu0 = time.perf_counter(), cpu_seconds()
             final, partial = out_dir / f"{name}.ipynb", out_dir / f".{name}.partial.ipynb"
             before = snapshot_outputs(root)
             save_snapshot(root, name, before)
@@ -272,6 +284,7 @@ def _run_locked(profile, profile_name, names, per_notebook, values, overrides, k
             record_cell_times(profile_name, name, final, run=names)
             (out_dir / f"{name}.failed.ipynb").unlink(missing_ok=True)
             durations[name] = round(time.perf_counter() - t, 1)
+            cpu[name] = round(cpu_seconds() - cpu0, 1)
             finished[name] = {"params": params_key, "code": code, "at": now_iso()}
             record("running")
     finally:

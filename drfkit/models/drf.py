@@ -361,7 +361,7 @@ class CalibratedGainDRF(DeepRecursiveFilter):
     """The paper's DRF with r_t = exp(log_r0 + softplus(slope) s_t) per latent dim (the comment above)."""
 
     kind = "drf_calibrated"
-    spec = ModelSpec("DRF, calibrated gain", "tab:cyan", studies=("pendulum",),
+    spec = ModelSpec("DRF, r told the noise (mean pixel)", "tab:cyan", studies=("pendulum",),
                      bench_modes=("batched", "no_sampling"), protocols={"book": "fit_calibrated_prior_wide"})
     #: not gated: claim C7 is about the paper's DRF, and the gating tables hold one gated model per seed
     competency_gain = False

@@ -51,7 +51,7 @@ HEADLINE_FIGURES = [
     ("pedestrians_picp_mpiw", "Pedestrian PICP against MPIW at the three noise levels"),
     ("pendulum_sweep", "Pendulum: MAE, PICP and NLL along the noise sweep"),
     ("pedestrians_sweep", "Pedestrians: MAE, PICP and NLL along the noise sweep"),
-    ("pendulum_book_mae", "Pendulum MAE of the book's training protocol (the DRF's filter checked to filter)"),
+    ("pendulum_book_mae", "Pendulum MAE of the book's training protocol (whether each filter filters: notebook 02)"),
     ("pendulum_blackout", "Pendulum: MAE per frame through 15 pure-noise frames, with the true-physics reference "
                           "(a particle filter on no_dynamics' outputs)"),
     ("pendulum_blackout_protocols", "Pendulum blackout under the paper's and the book's protocol, with the "
@@ -248,6 +248,7 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
     (claims.md's, the figures') are relative to results/<profile>/."""
     import json
 
+    from drfkit.study.params import NOTEBOOKS
     from drfkit.util.paths import results_dir
 
     root = results_dir(profile)
@@ -267,7 +268,8 @@ def results_section(profile: str, command: str, link_figures: bool) -> str:
              f"({last_run}, on {env.get('cpu', '?')} with {env.get('torch_threads', '?')} torch threads, git "
              f"{(env.get('git') or {}).get('commit', '?')}).",
              "Notebooks run for this profile so far: " + ", ".join(
-                 f"{name} ({entry.get('status', '?')})" for name, entry in sorted(manifest.get("notebooks", {}).items()))
+                 f"{name} ({entry.get('status', '?')})" for name, entry in sorted(manifest.get("notebooks", {}).items())
+                 if name in NOTEBOOKS)  # a notebook since renamed or removed is not this book's
              + ".", ""]
     table = claims.read_text().split("\n", 4)[-1]  # drop the title lines
     lines += [table.strip(), ""]

@@ -19,8 +19,8 @@
 # Every MAE here is the dropout-off pass's; the MC-dropout samples make the intervals (PICP, MPIW, NLL,
 # CRPS, calibration).
 # Each study is evaluated under every training protocol of its profile (`pend_protocols`, `ped_protocols`;
-# `drfkit.methods.protocols`: the paper's as written, and the book's, under which the DRF's filter is
-# checked to filter in notebook 02 and the pedestrians' DRF family is fit with β-NLL); every claim gets a
+# `drfkit.methods.protocols`: the paper's as written, and the book's, whose filters notebook 02 dissects
+# and whose pedestrian DRF family is fit with β-NLL); every claim gets a
 # verdict per protocol. Monoloco trains one set of runs under both.
 # The pendulum's sweep levels other than the paper's (0.5, 0.75) are evaluated on the first
 # `pend_sweep_sequences` test sequences (the tables' `sequences` column; every sequence where a claim reads

@@ -8,7 +8,8 @@ import pandas as pd
 
 from drfkit.study import paper
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, at_levels, cell, fmt, paired_difference, rows_of
+from drfkit.study.claims.verdicts import (NOMINAL_PAIRING, NOT, PARTLY, REPRODUCED, at_levels, cell, fmt,
+                                          paired_difference, rows_of)
 
 
 def c1_pendulum_mae_ordering(mae: pd.DataFrame, levels=(0.5, 0.75), by_seed: pd.DataFrame | None = None
@@ -38,9 +39,9 @@ def c1_pendulum_mae_ordering(mae: pd.DataFrame, levels=(0.5, 0.75), by_seed: pd.
                                for lv, row in paper.PENDULUM_MAE.items()),
             "ours": "; ".join(ours),
             "rule": "reproduced: at every level each step of the ordering holds beyond the seeds' 95 % interval "
-                    "of the paired MAE difference (seeds differ in initialisation only, so a gap inside that "
-                    "interval could be seed noise); partly: the seed-mean ordering holds at one level, or DRF "
-                    "has the lowest mean at every level; else not reproduced",
+                    f"of the MAE difference ({NOMINAL_PAIRING}; a gap inside that interval could be seed noise); "
+                    "partly: the seed-mean ordering holds at one level, or DRF has the lowest mean at every level; "
+                    "else not reproduced",
             "verdict": verdict}
 
 

@@ -11,7 +11,7 @@ import pandas as pd
 from drfkit.study import paper
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO, monoloco_name
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, cell, fmt_interval, seed_interval
+from drfkit.study.claims.verdicts import NOMINAL_PAIRING, NOT, PARTLY, REPRODUCED, cell, fmt_interval, seed_interval
 
 
 def improvement(by_seed: pd.DataFrame, base: str, levels) -> tuple[float, float, float]:
@@ -68,7 +68,7 @@ def c3_pedestrian_ood_gain(by_seed: pd.DataFrame, ood_levels=(0.025, 0.05),
                                  "no_dynamics, LSTM and Monoloco",
             "paper": ", ".join(f"{100 * v:.0f} %" for v in paper.PEDESTRIAN_OOD_IMPROVEMENT.values()) + " lower MAE",
             "ours": ours,
-            "rule": "improvement = 1 - MAE_DRF/MAE_base per seed (paired by seed), averaged over the OOD levels; "
+            "rule": f"improvement = 1 - MAE_DRF/MAE_base per seed ({NOMINAL_PAIRING}), averaged over the OOD levels; "
                     "mean over seeds with a 95 % t-interval; Monoloco is the one fed the DRF family's inputs (its "
                     "published input hides what the DRF family's encoder sees; as published it is a second, "
                     "unjudged comparison); reproduced: the interval is above 0 against all three; partly: above 0 "

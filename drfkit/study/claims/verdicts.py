@@ -82,6 +82,13 @@ def fmt(summary: pd.DataFrame, model: str, metric: str, digits: int = 4, scale: 
     return f"{mean:.{digits}g}" + ("" if math.isnan(half) else f" ± {half:.{digits - 1}g}")
 
 
+# what pairing by seed means across model kinds: seed s of every kind sees the same data in the same order and draws
+# the same dropout masks, but two architectures share no initialisation, so the pairing removes only the data's share
+# of the seed-to-seed spread; a paired interval is then about as wide as an unpaired one would be
+NOMINAL_PAIRING = ("paired by seed number: the same data, order and dropout draws, but no shared initialisation "
+                   "across model kinds, so the pairing is nominal")
+
+
 def paired_difference(by_seed: pd.DataFrame, a: str, b: str, noise: float, metric: str = "mae"
                       ) -> tuple[float, float, float]:
     """Mean over seeds of ``metric``(a) - ``metric``(b) at ``noise``, paired by seed (same data, each
@@ -176,6 +183,6 @@ CURVE_RULE = ("a DRF whose curve is one point for every dropout rate (no dropout
               "cover everything cannot be ranked by coverage); not testable if none is left")
 
 
-__all__ = ["REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
+__all__ = ["NOMINAL_PAIRING", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
            "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
            "curve_shares", "share_text", "curve_verdict", "CURVE_RULE", "collapsed_curve", "collapsed_text"]
