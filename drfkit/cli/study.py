@@ -189,7 +189,9 @@ def dynamics(argv: list[str]) -> int:
                     help="also the dissection (drfkit.study.dissection): variances against their errors per noise "
                          "level, the open loop by horizon and the oracle gain; name no_dynamics among --models "
                          "for its yardstick")
-    ap.add_argument("--csv", default=None, help="with --dissect: write the interventions table here")
+    ap.add_argument("--csv", default=None, help="with --dissect: write the interventions table here, and the horizons, "
+                                                 "oracle-gain and calibration tables beside it (<stem>_horizons.csv, "
+                                                 "<stem>_oracle_gain.csv, <stem>_calibration.csv)")
     ap.add_argument("--restarts", default=None, metavar="CSV",
                     help="only the validation-only restart rule on each --models kind's runs (every seed slot, the "
                          "replaced run too), written here (drfkit.study.dissection.restart_check)")
@@ -220,20 +222,25 @@ def dynamics(argv: list[str]) -> int:
             print(f"{kind} seed {seed}: epoch {models[(kind, seed)].checkpoint_meta.get('epoch')}")
     with pd.option_context("display.width", 200, "display.max_columns", 30, "display.precision", 3):
         filters = {k: m for k, m in models.items() if hasattr(m, "filter_diagnostics")}
-        if filters:
+        if filters and not args.dissect:  # the dissection measures what the probe does and more
             print(probe(P, filters, args.level, args.split).to_string(index=False))
         if args.dissect:
             from drfkit.study.dissection import calibration_summary, dissect_filters
             from drfkit.util.io import atomic_write_csv
 
-            calibration, interventions, horizons, _ = dissect_filters(P, models, split=args.split)
+            calibration, interventions, horizons, gains = dissect_filters(P, models, split=args.split)
             if len(calibration):
                 print(calibration_summary(calibration).to_string())
             print(interventions.to_string(index=False))
             if len(horizons):
                 print(horizons.pivot_table(index="h", columns=["model", "seed"], values="mae_clamped").round(4).to_string())
             if args.csv:
-                atomic_write_csv(args.csv, interventions)
+                from pathlib import Path
+
+                path = Path(args.csv)
+                atomic_write_csv(path, interventions)
+                for suffix, table in (("horizons", horizons), ("oracle_gain", gains), ("calibration", calibration)):
+                    atomic_write_csv(path.with_name(f"{path.stem}_{suffix}.csv"), table)
     return 0
 
 
