@@ -33,6 +33,7 @@ def test_it_reports_the_cpu_seconds_and_the_cores_each_notebook_kept_busy(tmp_pa
     assert "| 01_b | 90 | 90% | 171 | 1.90 of 2 | 0 |" in text and "| 00_a | 10 | 10% | 9 | 0.90 of 2 | 0 |" in text
 
 
+@pytest.mark.slow
 def test_the_pipeline_counts_a_childs_cpu_seconds():
     """cpu_seconds includes a child process the pipeline waited for (a notebook's kernel is one)."""
     import subprocess

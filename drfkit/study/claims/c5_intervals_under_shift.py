@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO
+from drfkit.study.claims.c2_pendulum_picp_mpiw import not_recalibrated
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
                                           curve_verdict, rows_of, share_text)
@@ -54,6 +55,10 @@ def judge(ood) -> Rows:
         # as C3 and C4: Monoloco fed the DRF family's inputs (one point per level, its own dropout rate)
         baselines["pedestrians"] = [MATCHED_MONOLOCO if b == PUBLISHED_MONOLOCO else b for b in baselines["pedestrians"]]
     for protocol, judged in ood.by_protocol():
+        if ood.curves is None:
+            rows.append((protocol, not_recalibrated(c5_intervals_under_shift(
+                pd.DataFrame(columns=["study", "model", "noise", "picp", "mpiw"]), [], baselines))))
+            continue
         shift = pd.concat([rows_of(ood.curves, s, pr) for s, pr in judged], ignore_index=True)
         if ood.matched is not None and any(s == "pedestrians" for s, _ in judged):
             shift = pd.concat([shift, ood.matched.assign(study="pedestrians", protocol=protocol)], ignore_index=True)

@@ -162,6 +162,12 @@ def collapsed_text(sub: pd.DataFrame, base: str, model: str = "drf") -> str:
             f"{a['cal_error']:.3f} vs {b['cal_error']:.3f}, PICP {100 * a['picp']:.0f}% vs {100 * b['picp']:.0f}%")
 
 
+# what C2 and C5 say where notebook 04 has not written the recalibrated curves (a results folder made before it did)
+NOT_RECALIBRATED = ("not judged: the intervals are not recalibrated in this results folder (notebook 04 writes "
+                    "ood_picp_mpiw_recalibrated.csv); as trained, every learned model's intervals are several times too "
+                    "wide in distribution, and coverage would rank their excess width")
+
+
 def curve_verdict(shares: dict) -> str:
     """The verdict of ``CURVE_RULE`` on (share, share beyond the intervals) per comparison: partly needs at least half
     of the points above in every comparison."""
@@ -183,6 +189,6 @@ CURVE_RULE = ("a DRF whose curve is one point for every dropout rate (no dropout
               "cover everything cannot be ranked by coverage); not testable if none is left")
 
 
-__all__ = ["NOMINAL_PAIRING", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
+__all__ = ["NOMINAL_PAIRING", "NOT_RECALIBRATED", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
            "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
            "curve_shares", "share_text", "curve_verdict", "CURVE_RULE", "collapsed_curve", "collapsed_text"]
