@@ -31,7 +31,7 @@ def test_claims_judges_the_committed_tables_into_the_committed_verdicts(paper_co
     assert cli(["claims", "--profile", "paper"]) == 0
     assert (paper_copy / "claims.csv").read_bytes() == (PAPER / "claims.csv").read_bytes()
     assert (paper_copy / "claims.md").read_bytes() == (PAPER / "claims.md").read_bytes()
-    assert "C7a  book   not testable" in capsys.readouterr().out
+    assert "C7a  book   partly" in capsys.readouterr().out
 
 
 def test_report_writes_the_committed_readme_section_and_report(paper_copy, tmp_path):

@@ -9,8 +9,8 @@ import pandas as pd
 
 from drfkit.study import paper
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
-from drfkit.study.claims.verdicts import (CURVE_RULE, NOT_RECALIBRATED, NOT_TESTABLE, SATURATED_PICP, collapsed_curve,
-                                          collapsed_text, curve_shares, curve_verdict, rows_of, share_text)
+from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
+                                          curve_verdict, not_recalibrated, rows_of, share_text)
 
 
 def c2_pendulum_picp_mpiw(curve: pd.DataFrame, levels=(0.5, 0.75)) -> dict[str, Any]:
@@ -54,13 +54,8 @@ def judge(ood) -> Rows:
 _EMPTY_CURVE = pd.DataFrame(columns=["model", "noise", "mpiw", "picp", "picp_lo", "picp_hi"])
 
 
-def not_recalibrated(row: dict[str, Any]) -> dict[str, Any]:
-    """A curve claim's row where no recalibrated curves exist: its rule and the paper's numbers, 'not testable'."""
-    return {**row, "ours": NOT_RECALIBRATED, "verdict": NOT_TESTABLE}
-
-
 CLAIM = CLAIMS.register("C2", Claim(
-    "C2", "04_ood_noise_evaluation", "notebook 04, pendulum", "The paper's figures, redrawn", ("ood_picp_mpiw_recalibrated.csv",),
+    "C2", "04_ood_noise_evaluation", "notebook 04, pendulum", "The paper's figures, redrawn", ("ood_picp_mpiw.csv",),
     ("pendulum_picp_mpiw.png",), judge, reads="ood"))
 
-__all__ = ["c2_pendulum_picp_mpiw", "not_recalibrated"]
+__all__ = ["c2_pendulum_picp_mpiw"]

@@ -8,10 +8,9 @@ import numpy as np
 import pandas as pd
 
 from drfkit.study.claims.monoloco import MATCHED_MONOLOCO, PUBLISHED_MONOLOCO
-from drfkit.study.claims.c2_pendulum_picp_mpiw import not_recalibrated
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
-                                          curve_verdict, rows_of, share_text)
+                                          curve_verdict, not_recalibrated, rows_of, share_text)
 
 
 def c5_intervals_under_shift(curves: pd.DataFrame, conditions: list[tuple[str, float]],
@@ -69,7 +68,7 @@ def judge(ood) -> Rows:
 
 CLAIM = CLAIMS.register("C5", Claim(
     "C5", "04_ood_noise_evaluation", "notebook 04, both studies", "The paper's figures, redrawn",
-    ("ood_all_metrics.csv", "ood_picp_mpiw_recalibrated.csv"), ("pendulum_picp_mpiw.png", "pedestrians_picp_mpiw.png"), judge,
+    ("ood_all_metrics.csv", "ood_picp_mpiw.csv"), ("pendulum_picp_mpiw.png", "pedestrians_picp_mpiw.png"), judge,
     reads="ood"))
 
 __all__ = ["c5_intervals_under_shift"]

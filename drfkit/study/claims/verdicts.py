@@ -168,6 +168,11 @@ NOT_RECALIBRATED = ("not judged: the intervals are not recalibrated in this resu
                     "wide in distribution, and coverage would rank their excess width")
 
 
+def not_recalibrated(row: dict) -> dict:
+    """A curve claim's row where no recalibrated curves exist: its rule and the paper's numbers, 'not testable'."""
+    return {**row, "ours": NOT_RECALIBRATED, "verdict": NOT_TESTABLE}
+
+
 def curve_verdict(shares: dict) -> str:
     """The verdict of ``CURVE_RULE`` on (share, share beyond the intervals) per comparison: partly needs at least half
     of the points above in every comparison."""
@@ -189,6 +194,6 @@ CURVE_RULE = ("a DRF whose curve is one point for every dropout rate (no dropout
               "cover everything cannot be ranked by coverage); not testable if none is left")
 
 
-__all__ = ["NOMINAL_PAIRING", "NOT_RECALIBRATED", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
+__all__ = ["NOMINAL_PAIRING", "NOT_RECALIBRATED", "not_recalibrated", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
            "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
            "curve_shares", "share_text", "curve_verdict", "CURVE_RULE", "collapsed_curve", "collapsed_text"]
