@@ -46,23 +46,16 @@ def test_overrides_are_parsed_as_yaml_and_checked():
 
 
 @pytest.mark.slow
-def test_overrides_reach_validation_before_any_notebook_runs(tmp_path):
+@pytest.mark.parametrize("only,setting,named", [
+    ("04_ood_noise_evaluation", "eval_studies=[nuscenes]", "eval_studies"),
+    # pend_epochs belongs to notebook 01: a run of 00 alone still checks it, against the whole profile's schema
+    ("00_data_prep", "pendulum.epochs=abc", "epochs"),
+])
+def test_overrides_reach_validation_before_any_notebook_runs(tmp_path, only, setting, named):
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", "quick", "--only",
-                           "04_ood_noise_evaluation", "--set", "eval_studies=[nuscenes]"],
-                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
-    assert proc.returncode == 2 and "eval_studies" in proc.stderr, proc.stderr[-2000:]
-    assert not (tmp_path / "results" / "quick" / "executed").exists()
-
-
-@pytest.mark.slow
-def test_a_bad_value_for_a_notebook_not_run_is_refused_before_any_work(tmp_path):
-    """pend_epochs belongs to notebook 01; a run of 00 alone still checks it, against the whole profile's schema."""
-    env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
-    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", "quick", "--only",
-                           "00_data_prep", "--set", "pendulum.epochs=abc"],
-                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
-    assert proc.returncode == 2 and "epochs" in proc.stderr, proc.stderr[-2000:]
+    proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", "quick", "--only", only,
+                           "--set", setting], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2 and named in proc.stderr, proc.stderr[-2000:]
     assert not (tmp_path / "results" / "quick" / "executed").exists()
 
 
