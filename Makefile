@@ -3,6 +3,9 @@
 PROFILE ?= paper
 # JOBS > 1: train the missing runs first on a Dask LocalCluster of JOBS workers (drfkit.book.grid)
 JOBS ?= 1
+# WORKERS: the notebooks' evaluations as tasks on this many single-threaded processes (auto: every usable core;
+# 1: in each notebook's kernel); the tables are the same at any WORKERS (drfkit.util.tasks)
+WORKERS ?= auto
 # REMEASURE=1: measure timings and compute the cached studies again (drfkit.book.measurements)
 REMEASURE ?=
 REMEASURE_FLAG := $(if $(filter-out 0,$(REMEASURE)),--remeasure)
@@ -22,6 +25,7 @@ NBVAL_FLAGS := --nbval --nbval-sanitize-with notebooks/nbval_sanitize.cfg --nbva
 help:
 	@echo "make reproduce [PROFILE=paper|quick]  run every notebook, results in results/\$$PROFILE/"
 	@echo "               [JOBS=N]               train the missing runs first on N Dask workers"
+	@echo "               [WORKERS=auto|N]       the evaluations on N worker processes (default: every core)"
 	@echo "               [REMEASURE=1]          measure timings again instead of reusing this machine's"
 	@echo "               [CELL_PROFILE=30]      keep a cProfile of every cell slower than 30 s (cell_profiles/)"
 	@echo "make quick                            the fast profile (< 10 min on 2 CPU cores)"
@@ -40,11 +44,11 @@ $(STAMP): environment.txt pyproject.toml
 	@touch $@
 
 reproduce: $(STAMP)
-	$(PY) -m drfkit reproduce --profile $(PROFILE) --jobs $(JOBS) $(REMEASURE_FLAG) $(CELL_PROFILE_FLAG)
+	$(PY) -m drfkit reproduce --profile $(PROFILE) --jobs $(JOBS) --workers $(WORKERS) $(REMEASURE_FLAG) $(CELL_PROFILE_FLAG)
 
 # the pipeline directly, not a second make: a SIGTERM to this make then reaches it (it dies with its parent)
 quick: $(STAMP)
-	$(PY) -m drfkit reproduce --profile quick $(REMEASURE_FLAG)
+	$(PY) -m drfkit reproduce --profile quick --workers $(WORKERS) $(REMEASURE_FLAG)
 
 test: $(STAMP) unit nbval
 

@@ -1,6 +1,7 @@
 """The verdict logic, fed synthetic results with known answers."""
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -148,23 +149,34 @@ def test_c5_over_the_curves():
     assert claims.c5_intervals_under_shift(point(0.95, 11.0), conds, bases)["verdict"] == claims.NOT
 
 
-def test_c6_speedup_thresholds():
-    assert claims.c6_speedup(3.1)["verdict"] == claims.REPRODUCED
-    assert claims.c6_speedup(2.0)["verdict"] == claims.PARTLY
-    assert claims.c6_speedup(1.1)["verdict"] == claims.NOT
-    # two-sided: far faster than the paper's 2.93x is a different finding, not the paper's
-    row = claims.c6_speedup(11.4)
-    assert row["verdict"] == claims.PARTLY and "3.9x the paper's factor" in row["ours"]
+def paired(geo_mean: float, half: float = 0.01, n: int = 40) -> np.ndarray:
+    """n per-round ratios whose geometric mean is ``geo_mean`` and whose 95 % interval (``ratio_interval``) is
+    geo_mean * exp(+-half) exactly: half the rounds at geo_mean * exp(a), half at geo_mean * exp(-a)."""
+    a = half * math.sqrt(n - 1) / 1.96   # t975(39) is the normal's 1.96; sd = a sqrt(n / (n - 1))
+    return geo_mean * np.exp(np.r_[np.full(n // 2, a), np.full(n // 2, -a)])
+
+
+def test_c6_paired_rounds_decide():
+    m, lo, hi = claims.ratio_interval(paired(3.0))
+    assert m == pytest.approx(3.0) and lo == pytest.approx(3.0 * math.exp(-0.01)) and hi == pytest.approx(3.0 * math.exp(0.01))
+    assert claims.c6_paired(paired(3.0))["verdict"] == claims.REPRODUCED
+    row = claims.c6_paired(paired(11.4))
+    assert row["verdict"] == claims.DIFFERENT_FACTOR and "faster than claimed: 3.9x the paper's factor" in row["ours"]
+    row = claims.c6_paired(paired(2.0))
+    assert row["verdict"] == claims.DIFFERENT_FACTOR and "slower than claimed" in row["ours"]
+    assert claims.c6_paired(paired(3.37, half=0.05))["verdict"] == claims.AT_EDGE   # the committed runs' case
+    assert claims.c6_paired([])["verdict"] == claims.NOT_TESTABLE
+    assert "40 paired rounds" in claims.c6_paired(paired(3.0))["ours"]
 
 
 def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    claims.upsert("t", [claims.c6_speedup(3.0)])
-    claims.upsert("t", [claims.c6_speedup(1.0), claims.c4_in_distribution_parity(
+    claims.upsert("t", [claims.c6_paired(paired(3.0))])
+    claims.upsert("t", [claims.c6_paired(paired(1.0)), claims.c4_in_distribution_parity(
         ped((2.6, 1, 1), (1, 1, 1), (1, 1, 1), (2.5, 1, 1)))])
     table = pd.read_csv(tmp_path / "t" / "claims.csv")
     assert list(table["id"]) == ["C4", "C6"]
-    assert table.set_index("id").loc["C6", "verdict"] == claims.NOT
+    assert table.set_index("id").loc["C6", "verdict"] == claims.DIFFERENT_FACTOR
     text = (tmp_path / "t" / "claims.md").read_text()
     assert "| C6 |" in text
     # the claims no notebook has filled yet are named, with where they come from
@@ -175,15 +187,16 @@ def test_upsert_replaces_rows_and_renders(tmp_path, monkeypatch):
 def test_claims_carry_their_protocol_and_old_tables_read_as_the_papers(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     (tmp_path / "t").mkdir()
-    old = pd.DataFrame([claims.c6_speedup(3.0)])[["id", "claim", "paper", "ours", "rule", "verdict"]]
+    old = pd.DataFrame([claims.c6_paired(paired(3.0))])[["id", "claim", "paper", "ours", "rule", "verdict"]]
     old.to_csv(tmp_path / "t" / "claims.csv", index=False)   # a table from before the protocol column
-    claims.upsert("t", [claims.c6_speedup(1.0)], protocol="book")
+    claims.upsert("t", [claims.c6_paired(paired(1.0))], protocol="book")
     table = pd.read_csv(tmp_path / "t" / "claims.csv")
     assert list(zip(table["id"], table["protocol"], table["verdict"])) == [
-        ("C6", "paper", claims.REPRODUCED), ("C6", "book", claims.NOT)]
-    claims.upsert("t", [claims.c6_speedup(2.0)], protocol="paper")
+        ("C6", "paper", claims.REPRODUCED), ("C6", "book", claims.DIFFERENT_FACTOR)]
+    claims.upsert("t", [claims.c6_paired(paired(3.37, half=0.05))], protocol="paper")
     table = pd.read_csv(tmp_path / "t" / "claims.csv")
-    assert list(zip(table["protocol"], table["verdict"])) == [("paper", claims.PARTLY), ("book", claims.NOT)]
+    assert list(zip(table["protocol"], table["verdict"])) == [("paper", claims.AT_EDGE),
+                                                              ("book", claims.DIFFERENT_FACTOR)]
     assert "| C6 | book |" in (tmp_path / "t" / "claims.md").read_text()
 
 
@@ -255,15 +268,23 @@ def test_c4_at_its_band_edges():
 
 
 def test_c6_at_its_thresholds():
-    """Two-sided: within 15 % of the paper's 2.93x either way (2.4905-3.3695x) reproduces it; outside
-    that band but >= 1.5x is partly; below 1.5x not reproduced."""
-    lo, hi = 2.93 * 0.85, 2.93 * 1.15
-    assert claims.c6_speedup(lo)["verdict"] == claims.REPRODUCED
-    assert claims.c6_speedup(hi)["verdict"] == claims.REPRODUCED
-    assert claims.c6_speedup(lo - 1e-4)["verdict"] == claims.PARTLY
-    assert claims.c6_speedup(hi + 1e-4)["verdict"] == claims.PARTLY
-    assert claims.c6_speedup(1.5)["verdict"] == claims.PARTLY
-    assert claims.c6_speedup(1.4999)["verdict"] == claims.NOT
+    """The band is 2.93x +- 15 % (2.4905-3.3695x); an interval inside it reproduces, one wholly outside is a
+    different factor, one across an end is at the edge: the verdict flips as one end of the interval
+    crosses an end of the band."""
+    lo, hi, e = 2.93 * 0.85, 2.93 * 1.15, math.exp(0.01)
+    v = lambda m: claims.c6_paired(paired(m))["verdict"]  # noqa: E731 (interval m/e .. m*e)
+    assert v(hi / e * 0.9999) == claims.REPRODUCED and v(hi / e * 1.0001) == claims.AT_EDGE
+    assert v(hi * e * 0.9999) == claims.AT_EDGE and v(hi * e * 1.0001) == claims.DIFFERENT_FACTOR
+    assert v(lo * e * 1.0001) == claims.REPRODUCED and v(lo * e * 0.9999) == claims.AT_EDGE
+    assert v(lo / e * 1.0001) == claims.AT_EDGE and v(lo / e * 0.9999) == claims.DIFFERENT_FACTOR
+
+
+def test_c6_rounds_for_band_follow_the_spread():
+    """Rounds for an interval narrower than the band: (2 * 1.96 * sd / log(1.15 / 0.85))^2 of the log ratios."""
+    x = paired(3.0, half=0.05, n=40)
+    sd = float(np.log(x).std(ddof=1))
+    assert claims.rounds_for_band(x) == math.ceil((2 * 1.96 * sd / math.log(1.15 / 0.85)) ** 2)
+    assert claims.rounds_for_band(paired(3.0, half=0.2, n=40)) > claims.rounds_for_band(x)
 
 
 def test_f1_at_its_thresholds():
@@ -311,3 +332,17 @@ def test_monoloco_inputs_reading_splits_the_gap_by_its_share():
     network = claims.monoloco_inputs_reading(rows(1.4, 1.3, 0.8), 0.01)
     assert network["share"] == pytest.approx(1 / 6) and "not its inputs" in network["text"]
     assert "no handicap" in claims.monoloco_inputs_reading(rows(0.7, 0.9, 0.8), 0.01)["text"]
+
+
+def test_encoder_width_reading_flips_at_half_the_gap():
+    """no_dynamics 0.90 against the input-matched Monoloco 0.80: a wide encoder at 0.85 closes exactly half the gap
+    (the width is the bottleneck); at 0.8501, just under half (it is not)."""
+    def rows(nd_wide, drf_wide=0.84):
+        models = ["monoloco_detected_inputs", "no_dynamics", "no_dynamics_monoloco_width", "drf_monoloco_width"]
+        return pd.DataFrame({"model": models, "noise": 0.01, "mae": [0.80, 0.90, nd_wide, drf_wide]})
+    width = claims.encoder_width_reading(rows(0.85), 0.01)
+    assert width["share"] == pytest.approx(0.5) and "the bottleneck is the encoder's width" in width["text"]
+    assert "+12 %" in width["text"] and "-1 % against its encoder alone" in width["text"]
+    assert "not the encoder's width" in claims.encoder_width_reading(rows(0.8501), 0.01)["text"]
+    fine = rows(0.85).assign(mae=[0.9, 0.8, 0.8, 0.8])
+    assert "no gap" in claims.encoder_width_reading(fine, 0.01)["text"]

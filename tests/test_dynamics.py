@@ -189,6 +189,20 @@ def test_blackout_summary_and_per_frame_error():
         diagnostics.blackout_summary(per_frame, (4, 9))
 
 
+def test_recovery_summary_on_a_known_curve():
+    """Before the gap 0.1; the gap [4, 6) at 1.0; then 0.5, 0.2, 0.14, 0.1: back within 1.5 x 0.1 at the third
+    frame after the gap (index 2), after / before = mean(0.5, 0.2, 0.14, 0.1) / 0.1."""
+    per_frame = np.array([0.1, 0.1, 0.1, 0.1, 1.0, 1.0, 0.5, 0.2, 0.14, 0.1])
+    s = diagnostics.recovery_summary(per_frame, (4, 6), after=4)
+    assert s["mae_before_blackout"] == pytest.approx(0.1)
+    assert s["recovery_ratio"] == pytest.approx(0.235 / 0.1)
+    assert s["frames_to_recover"] == 2.0
+    never = diagnostics.recovery_summary(np.r_[per_frame[:6], [0.5, 0.4, 0.3, 0.2]], (4, 6), after=4)
+    assert np.isnan(never["frames_to_recover"])
+    with pytest.raises(ValueError, match="one after it"):
+        diagnostics.recovery_summary(per_frame, (4, 10))
+
+
 def test_blackouts_replace_only_their_frames_with_pure_noise():
     arrays = pend.generate_pendulum(4, 20, Noise("rkn_uniform", 0.0), seed=3)
     dark = pend.with_blackout(arrays, 5, 9, seed=0)

@@ -158,7 +158,8 @@ def toy_registered(monkeypatch, tmp_path):
 def test_a_model_kind_added_in_one_file_trains_evaluates_is_timed_and_judged(toy_registered):
     P = toy_registered
     # its spec puts it in the pendulum study (after the book's kinds), the bench, the figures
-    assert registry.STUDIES["pendulum"].kinds == ("drf", "drf_calibrated", "no_dynamics", "lstm", "known_dynamics", "toy")
+    assert registry.STUDIES["pendulum"].kinds == ("drf", "drf_calibrated", "drf_calibrated_steep", "no_dynamics", "lstm",
+                                                  "known_dynamics", "toy")
     assert "toy" not in registry.STUDIES["pedestrians"].kinds
     assert studies.study_models(P, "pendulum") == ["drf", "toy"]  # the profile's check reads the registry
     assert (figures.label("toy"), figures.color("toy"), figures.drawn_in_colour("toy")) == \

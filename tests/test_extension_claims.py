@@ -59,7 +59,7 @@ def test_a_claim_written_as_one_file_is_judged_listed_and_gone_after_the_block(t
         # the judge finds it without naming it: the book's claims have no tables in this profile, so no rows
         [(protocol, row)] = judge.judge(P)
         assert protocol == "paper" and row["id"] == "X1" and row["verdict"] == claims.REPRODUCED
-        claims.upsert("t", [claims.c6_speedup(3.0)])
+        claims.upsert("t", [claims.c6_paired([2.9, 3.1] * 20)])
         table = judge.write(P, ["X1"])
         assert list(table["id"]) == ["C6", "X1"]
         text = (tmp_path / "results" / "t" / "claims.md").read_text()

@@ -59,6 +59,16 @@ def test_overrides_reach_validation_before_any_notebook_runs(tmp_path, only, set
     assert not (tmp_path / "results" / "quick" / "executed").exists()
 
 
+def test_a_bad_worker_count_is_refused_before_any_notebook_runs(tmp_path, monkeypatch, capsys):
+    from drfkit.cli import main as cli
+
+    monkeypatch.setenv("DRF_RESULTS", str(tmp_path / "results"))
+    with pytest.raises(SystemExit) as stop:
+        cli(["reproduce", "--profile", "quick", "--only", "00_data_prep", "--workers", "two"])
+    assert stop.value.code == 2 and "--workers" in capsys.readouterr().err
+    assert not (tmp_path / "results" / "quick" / "executed").exists()
+
+
 @pytest.mark.slow
 def test_the_pipeline_s_kernels_run_over_ipc_and_print_no_tcp_warning(tmp_path, capfd):
     """drfkit.book.pipeline.ipc_kernels: the kernel papermill starts listens on Unix sockets in a

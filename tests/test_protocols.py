@@ -26,9 +26,10 @@ def quick(tmp_path, monkeypatch, **over):
 
 def test_every_protocol_names_a_variant_per_model():
     for protocol, kinds in PROTOCOLS.items():
-        # the book's protocol adds the calibrated-gain DRF and the known-dynamics filter, the model-based reference
+        # the book's protocol adds the calibrated-gain DRF, the fifth round's choice (its steep-link version) and the
+        # known-dynamics filter, the model-based reference
         assert set(kinds) == {"drf", "no_dynamics", "lstm"} | (
-            {"drf_calibrated", "known_dynamics"} if protocol == "book" else set())
+            {"drf_calibrated", "drf_calibrated_steep", "known_dynamics"} if protocol == "book" else set())
         for kind, variant in kinds.items():
             assert VARIANTS[variant]["kind"] == kind
     assert protocol_spec("paper", "drf") == {"kind": "drf", "model": {}, "blackouts": None, "train_max_noise": 0.5,

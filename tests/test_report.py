@@ -11,7 +11,7 @@ from drfkit.report.writers import results_section
 def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
     assert "No results for profile `p` yet" in results_section("p", "make reproduce", False)
-    claims.upsert("p", [claims.c6_speedup(3.0)])
+    claims.upsert("p", [claims.c6_paired([2.9, 3.1] * 20)])
     (tmp_path / "p" / "manifest.json").write_text(json.dumps({
         "pipeline": {"status": "ok", "total_s": 12.0, "notebooks": ["04_ood_noise_evaluation"]},
         "overrides": {"eval_studies": ["pedestrians"]},
@@ -29,7 +29,7 @@ def test_results_section_reports_last_run_claims_and_budget_left(tmp_path, monke
 
 def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    claims.upsert("p", [claims.c6_speedup(3.0)])
+    claims.upsert("p", [claims.c6_paired([2.9, 3.1] * 20)])
     base = {"study": "pendulum", "epochs": 200, "seeds": 3, "hours": 1.0, "epochs_done": 0, "hours_left": 1.0,
             "threads": 1, "ratio_to": "no_dynamics"}
     pd.DataFrame([{**base, "model": "no_dynamics", "epoch_s": 20.0, "step_ratio": 1.0},
@@ -67,7 +67,7 @@ def test_results_section_reports_step_ratios_and_the_training_speed_table(tmp_pa
 
 def test_results_section_reports_the_recursion_scaling_per_thread_count(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    claims.upsert("p", [claims.c6_speedup(3.0)])
+    claims.upsert("p", [claims.c6_paired([2.9, 3.1] * 20)])
     (tmp_path / "p" / "tables").mkdir()
     assert "Per-call cost" not in results_section("p", "make reproduce", False)
     rows = []
@@ -89,7 +89,7 @@ def test_results_section_reports_the_recursion_scaling_per_thread_count(tmp_path
 
 def test_results_section_reports_whole_epochs(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    claims.upsert("p", [claims.c6_speedup(3.0)])
+    claims.upsert("p", [claims.c6_paired([2.9, 3.1] * 20)])
     (tmp_path / "p" / "tables").mkdir()
     common = {"threads": 2, "rounds": 3, "sequences": 2000, "batch": 50}
     pd.DataFrame([{**common, "model": "no_dynamics", "epoch_median_s": 7.0, "ratio_to_no_dynamics": 1.0,
@@ -107,7 +107,7 @@ def test_results_section_reports_whole_epochs(tmp_path, monkeypatch):
 
 def test_an_interrupted_run_is_reported_with_its_note_and_no_total(tmp_path, monkeypatch):
     monkeypatch.setenv("DRF_RESULTS", str(tmp_path))
-    claims.upsert("p", [claims.c6_speedup(3.0)])
+    claims.upsert("p", [claims.c6_paired([2.9, 3.1] * 20)])
     (tmp_path / "p" / "manifest.json").write_text(json.dumps({
         "pipeline": {"status": "interrupted", "total_s": None, "notebooks": ["06_competency_gating"],
                      "note": "killed during 06_competency_gating"}}))

@@ -101,7 +101,8 @@ STREAM_CASES = [(study, kind) for study, (_, _, kinds) in STUDIES.items() for ki
 
 @pytest.mark.parametrize("study,kind", STREAM_CASES)
 def test_streaming_steps_reproduce_the_whole_sequence(study, kind):
-    assert {k for _, k in STREAM_CASES} == {"drf", "drf_calibrated", "lstm", "no_dynamics", "monoloco", "known_dynamics"}
+    assert {k for _, k in STREAM_CASES} == {"drf", "drf_calibrated", "drf_calibrated_steep", "lstm", "no_dynamics",
+                                            "monoloco", "known_dynamics"}
     model = build_timing_model(kind, study)
     seq = example_frames(study, batch=3, n_frames=5, seed=1)
     with torch.no_grad():
@@ -267,11 +268,21 @@ def test_cli_writes_timing_csv(tmp_path, monkeypatch, capsys):
         "profile": "tiny", "seeds": [0], "device": "cpu", "threads": 0, "n_samples": 2,
         "timing_batch_sizes": [1], "timing_threads": [1], "timing_min_run_time": 0.01})
     assert cli(["bench", "--profile", str(profile)]) == 0
-    written = pd.read_csv(tmp_path / "results" / "tiny" / "timing.csv")
+    written = pd.read_csv(tmp_path / "results" / "tiny" / "bench" / "timing.csv")
     assert list(written.columns) == COLUMNS
     assert len(written) == sum(len(MODES[k]) for _, _, kinds in STUDIES.values() for k in kinds)
     assert set(written["device"]) == {"cpu"} and set(written["batch"]) == {1}
     assert "median_ms_per_frame" in capsys.readouterr().out
+    # the record names the command and the parameters; notebook 05 reads the table only for the same parameters
+    from drfkit.book.bench_store import read_bench
+    from drfkit.study.params import for_notebook, load_profile
+
+    P = for_notebook("bench", load_profile(str(profile)))
+    table, record = read_bench(P)
+    assert record["command"] == "make bench PROFILE=tiny" and record["params"]["batch_sizes"] == [1]
+    assert table.equals(written)
+    other = for_notebook("bench", load_profile(str(profile)) | {"timing_batch_sizes": [1, 4]})
+    assert read_bench(other) is None
 
 
 def test_training_step_times_still_reports_epochs():
@@ -353,6 +364,20 @@ def test_interleaved_times_rotates_the_order_and_times_every_fn_each_round():
     assert min(out["slow"]) > 0.0015 and max(out["fast"]) < min(out["slow"])
     with pytest.raises(ValueError, match="empty"):
         timing.interleaved_times({}, min_run_time=0.1)
+
+
+def test_paired_rounds_time_claim_c6s_pair_round_by_round(monkeypatch):
+    """One row per round; each round's ratio is that round's Monoloco over that round's DRF (paired), and the
+    pair is Monoloco as published against the DRF's sequential passes."""
+    timed = []
+    real = bench.make_frame_fn
+    monkeypatch.setattr(bench, "make_frame_fn", lambda model, mode, *a: timed.append((model.kind, mode)) or real(model, mode, *a))
+    out = bench.paired_rounds(n_samples=2, rounds=3, block_s=0.0)
+    assert timed == [("monoloco", "published"), ("drf", "sequential")]
+    assert list(out["round"]) == [0, 1, 2] and (out["monoloco_ms"] > 0).all() and (out["drf_ms"] > 0).all()
+    assert np.allclose(out["ratio"], out["monoloco_ms"] / out["drf_ms"])
+    with pytest.raises(ValueError, match="interval needs two"):
+        bench.paired_rounds(n_samples=2, rounds=1)
 
 
 def test_training_step_ratio_is_the_median_of_per_round_ratios(monkeypatch):

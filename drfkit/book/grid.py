@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterable
 from drfkit.study import registry
 from drfkit.study import studies as runs_of
 from drfkit.study.params import ParameterError
+from drfkit.util.tasks import local_cluster, usable_cores
 
 
 @dataclass(frozen=True)
@@ -174,13 +175,6 @@ def describe(result: dict[str, Any]) -> str:
 
 
 # --------------------------------------------------------------------------- the cluster
-def usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
-
-
 def parse_scheduler(scheduler: str, threads: int) -> tuple[str, int | None]:
     """``'local'`` / ``'local:N'`` -> ('local', N); an address -> (address, None)."""
     if scheduler == "local" or scheduler.startswith("local:"):
@@ -198,13 +192,12 @@ class _Connection:
     """A Dask client on a new LocalCluster (closed with it) or on a running scheduler."""
 
     def __init__(self, scheduler: str, threads: int, n_runs: int):
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         address, n_workers = parse_scheduler(scheduler, threads)
         self.cluster = None
         if address == "local":
-            self.cluster = LocalCluster(n_workers=min(n_workers, max(n_runs, 1)), threads_per_worker=1,
-                                        processes=True)
+            self.cluster = local_cluster(min(n_workers, max(n_runs, 1)))
             self.client = Client(self.cluster)
         else:
             self.client = Client(address)

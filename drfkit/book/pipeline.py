@@ -157,6 +157,7 @@ def run(profile: str, only: list[str] | None = None, kernel: str = "python3",
                         pipeline={"started": started, "finished": finished_at, "status": status,
                                   "total_s": round(time.perf_counter() - t0, 1) if finished_at else None,
                                   "durations_s": durations, "cpu_s": cpu, "cores": os.cpu_count(),
+                                  "workers": os.environ.get("DRF_WORKERS", "1"),
                                   "notebooks": names, "finished_notebooks": finished})
 
     with exclusive_lock(root / PIPELINE_LOCK, f"profile {profile_name} (results {root})", announce_stale=True):

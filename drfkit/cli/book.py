@@ -28,6 +28,10 @@ def reproduce(argv: list[str]) -> int:
     ap.add_argument("--remeasure", action="store_true",
                     help="measure the timings and compute the cached deterministic studies again "
                          "(drfkit.book.measurements) instead of reusing them")
+    ap.add_argument("--workers", metavar="N|auto|tcp://HOST:PORT",
+                    help="the evaluations as tasks on N single-threaded worker processes (drfkit.util.tasks; "
+                         "auto: the usable cores; default: $DRF_WORKERS, else 1, in each notebook's kernel); "
+                         "the tables are the same at any N")
     ap.add_argument("--cell-profile", type=float, metavar="SECONDS",
                     help="run every cell under cProfile and keep the profile of each cell slower than SECONDS "
                          "in results/<profile>/cell_profiles/ (drfkit.book.cell_profile)")
@@ -38,6 +42,14 @@ def reproduce(argv: list[str]) -> int:
         if not args.cell_profile >= 0:
             ap.error("--cell-profile: seconds >= 0")
         os.environ[CELL_PROFILE_ENV] = str(args.cell_profile)  # the notebooks' kernels inherit it
+    if args.workers is not None:
+        from drfkit.util.tasks import ENV as WORKERS_ENV, task_workers
+
+        try:
+            task_workers(args.workers)
+        except ValueError as exc:
+            ap.error(f"--workers: {exc}")
+        os.environ[WORKERS_ENV] = args.workers  # the notebooks' kernels inherit it
     if args.remeasure:
         from drfkit.book.measurements import REMEASURE_ENV
 

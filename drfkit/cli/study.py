@@ -246,26 +246,23 @@ def dynamics(argv: list[str]) -> int:
 
 def bench(argv: list[str]) -> int:
     """``python -m drfkit bench --profile quick|paper|path.yaml``: run the inference benchmark with
-    the profile's n_samples and timing_* keys, print the table and write
-    results/<profile>/timing.csv."""
+    the profile's n_samples and timing_* keys, print the table and write results/<profile>/bench/timing.csv
+    and bench/manifest.json (``drfkit.book.bench_store``; notebook 05 reads them)."""
     import math
 
     import pandas as pd
     import torch
 
-    from drfkit.study.bench import device_ratios, inference_benchmark
+    from drfkit.book.bench_store import bench_dir, describe, write_bench
+    from drfkit.study.bench import device_ratios
     from drfkit.study.params import for_notebook, load_profile
-    from drfkit.util.io import atomic_write_csv
-    from drfkit.util.paths import results_dir
 
     ap = parser("bench", bench.__doc__, profile="quick")
     args = ap.parse_args(argv)
     P = for_notebook("bench", load_profile(args.profile))
     if P.threads:
         torch.set_num_threads(P.threads)
-    table = inference_benchmark(P.uncertainty.n_samples, P.timing.batch_sizes, P.timing.threads,
-                                P.timing.min_run_time, P.device, seed=P.seeds[0],
-                                progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
+    table, record = write_bench(P, progress=lambda msg: print(f"timing {msg}", file=sys.stderr, flush=True))
     fmt = lambda v: "nan" if math.isnan(v) else f"{v:.4g}"  # noqa: E731
     print(f"devices measured: {', '.join(sorted(table['device'].astype(str).unique()))} "
           f"(torch {torch.__version__}; CUDA {'available' if torch.cuda.is_available() else 'not available'})")
@@ -275,8 +272,7 @@ def bench(argv: list[str]) -> int:
         if len(ratios):
             print("GPU over CPU (time per frame, CPU / GPU):")
             print(ratios.to_string(index=False, float_format=fmt))
-    path = atomic_write_csv(results_dir(P.profile) / "timing.csv", table)
-    print(f"wrote {path}")
+    print(f"wrote {bench_dir(P.profile)}/timing.csv and manifest.json: {describe(record)}")
     return 0
 
 

@@ -113,6 +113,29 @@ def blackout_summary(mae_per_frame: np.ndarray, frames: tuple[int, int], after: 
             "mae_after_blackout": float(tail.mean()) if tail.size else math.nan}
 
 
+# Recovery: how far the estimate is from where it was before the gap once the frames are usable again. The
+# yardstick is the model's own MAE on the ``after`` ordinary frames before the gap (same sequences, same noise), so
+# a slow model is not called recovered for matching its slow self; "recovered" is within RECOVERY_WITHIN of it.
+RECOVERY_WITHIN = 1.5
+
+
+def recovery_summary(mae_per_frame: np.ndarray, frames: tuple[int, int], after: int = 15) -> dict[str, float]:
+    """After a blackout [start, stop): 'mae_before_blackout' (up to ``after`` frames before the gap),
+    'recovery_ratio' (MAE on the ``after`` frames after the gap / before it; 1 = back where it was) and
+    'frames_to_recover' (frames after the gap until the MAE first falls to RECOVERY_WITHIN x the before-gap MAE;
+    NaN if it does not within ``after`` frames)."""
+    start, stop = frames
+    mae_per_frame = np.asarray(mae_per_frame, dtype=np.float64)
+    if not 1 <= start < stop <= mae_per_frame.size - 1:
+        raise ValueError(f"a recovery needs a frame before the blackout {frames} and one after it, "
+                         f"in {mae_per_frame.size} frames")
+    before = float(mae_per_frame[max(0, start - after):start].mean())
+    tail = mae_per_frame[stop:stop + after]
+    back = np.flatnonzero(tail <= RECOVERY_WITHIN * before)
+    return {"mae_before_blackout": before, "recovery_ratio": float(tail.mean()) / before,
+            "frames_to_recover": float(back[0]) if back.size else math.nan}
+
+
 def diagnose(model, arrays: dict[str, Any], batch_size: int = 100) -> tuple[dict[str, float], np.ndarray]:
     """:func:`mechanism_summary` plus the overall MAE on a pendulum split ('images', 'targets',
     'noise'); returns (summary, MAE per frame (T,))."""

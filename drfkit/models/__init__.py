@@ -13,7 +13,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from drfkit.models.drf import CalibratedGainDRF, DeepRecursiveFilter
+from drfkit.models.drf import CalibratedGainDRF, DeepRecursiveFilter, SteepGainDRF
 from drfkit.models.known_dynamics import KnownDynamicsFilter
 from drfkit.models.monoloco import Monoloco, centre_keypoints, relative_laplace_loss
 from drfkit.models.parts import Decoder, ImageEncoder, KeypointEncoder, ObservationHeads
@@ -23,7 +23,7 @@ from drfkit.models.kinds import MODEL_CLASSES, kinds_of, model_spec
 from drfkit.models.spec import ModelSpec
 
 # the book's kinds, in the order every list of models shows them (tables, legends, study kinds)
-for _cls in (DeepRecursiveFilter, CalibratedGainDRF, NoDynamics, LSTMBaseline, Monoloco, KnownDynamicsFilter):
+for _cls in (DeepRecursiveFilter, CalibratedGainDRF, SteepGainDRF, NoDynamics, LSTMBaseline, Monoloco, KnownDynamicsFilter):
     MODEL_CLASSES.register(_cls.kind, _cls)
 
 
@@ -66,7 +66,7 @@ def default_config(kind: str, input_kind: str, out_dim: int, **overrides: Any) -
 
 __all__ = [
     "build_model", "default_config", "kinds_of", "model_spec", "ModelSpec", "MODEL_CLASSES", "INPUT_KINDS", "SequenceModel",
-    "CalibratedGainDRF", "DeepRecursiveFilter", "KnownDynamicsFilter", "NoDynamics", "LSTMBaseline", "Monoloco",
+    "CalibratedGainDRF", "SteepGainDRF", "DeepRecursiveFilter", "KnownDynamicsFilter", "NoDynamics", "LSTMBaseline", "Monoloco",
     "ImageEncoder", "KeypointEncoder", "ObservationHeads", "TransitionNetwork", "Decoder",
     "gaussian_nll", "centre_keypoints", "relative_laplace_loss",
 ]

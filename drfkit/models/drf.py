@@ -398,3 +398,15 @@ class CalibratedGainDRF(DeepRecursiveFilter):
         return self.head(mean_and_log_variance(w, r))
 
 
+
+
+# The fifth round's choice (docs/dynamics.md, "The fifth round"): the same model with its r link's slope started at 6
+# per unit of s instead of 2 (``params/protocols.yaml``, part ``steep``; the slope barely moves in training, so its
+# start sets how far the gain falls beyond the training levels). Its own kind so that the book protocol keeps the
+# calibrated-gain DRF beside it, each its own row.
+class SteepGainDRF(CalibratedGainDRF):
+    """The calibrated-gain DRF whose book-protocol variant starts the r link's slope at 6 (``fit_steep_wide``)."""
+
+    kind = "drf_calibrated_steep"
+    spec = ModelSpec("DRF, r told the noise, steep link", "tab:olive", studies=("pendulum",),
+                     bench_modes=("batched", "no_sampling"), protocols={"book": "fit_steep_wide"})

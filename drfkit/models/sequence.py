@@ -59,15 +59,17 @@ INPUT_KINDS = ("pendulum", "keypoints")
 # how a belief [mean, log variance] becomes the output: the learned decoder (MC dropout), or read as it is
 # (the first out_dim latent dims are the output's units, so r and q are variances of the output)
 READOUTS = ("decoder", "identity")
+KEYPOINT_HIDDEN = 128  # the keypoint encoder's hidden width (``encoder_hidden``)
 
 _HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
-def make_encoder(input_kind: str, feature_dim: int, image_downsample: str, channels: int = 12) -> nn.Module:
+def make_encoder(input_kind: str, feature_dim: int, image_downsample: str, channels: int = 12,
+                 hidden: int = KEYPOINT_HIDDEN) -> nn.Module:
     if input_kind == "pendulum":
         return ImageEncoder(feature_dim, channels=channels, downsample=image_downsample)
     if input_kind == "keypoints":
-        return KeypointEncoder(feature_dim)
+        return KeypointEncoder(feature_dim, hidden=hidden)
     raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
 
 
@@ -256,11 +258,13 @@ class _EncodedSequenceModel(SequenceModel):
                  feature_dim: int = 64, decoder_hidden: int = 64, dropout_p: float = 0.1,
                  image_downsample: str = "pool", target_offset: float = 0.0, target_scale: float = 1.0,
                  noise_head: str = "elu", decoder_split: bool = False, encoder_channels: int = 12,
-                 readout: str = "decoder", _extra_config: dict[str, Any] | None = None):
+                 readout: str = "decoder", encoder_hidden: int = KEYPOINT_HIDDEN,
+                 _extra_config: dict[str, Any] | None = None):
         if input_kind not in INPUT_KINDS:
             raise ValueError(f"input_kind must be one of {INPUT_KINDS}, got {input_kind!r}")
         for name, value in (("out_dim", out_dim), ("latent", latent), ("feature_dim", feature_dim),
-                            ("decoder_hidden", decoder_hidden), ("encoder_channels", encoder_channels)):
+                            ("decoder_hidden", decoder_hidden), ("encoder_channels", encoder_channels),
+                            ("encoder_hidden", encoder_hidden)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive int, got {value!r}")
         check_dropout_p(dropout_p)
@@ -277,20 +281,24 @@ class _EncodedSequenceModel(SequenceModel):
                              "cannot be split (decoder_split is for the DRF and no_dynamics)")
         if readout not in READOUTS:
             raise ValueError(f"readout must be one of {READOUTS}, got {readout!r}")
+        if encoder_hidden != KEYPOINT_HIDDEN and input_kind != "keypoints":
+            raise ValueError(f"encoder_hidden is the keypoint encoder's width; the image encoder's is "
+                             f"encoder_channels (got encoder_hidden={encoder_hidden!r} for {input_kind!r})")
         if readout == "identity" and (not self.belief_features or decoder_split):
             raise ValueError("readout='identity' reads the output off the belief's first out_dim dims: for the DRF "
                              "and no_dynamics, without decoder_split")
         extra = dict(_extra_config or {}) | ({"noise_head": noise_head} if noise_head != "elu" else {}) \
             | ({"readout": readout} if readout != "decoder" else {}) \
             | ({"decoder_split": True} if decoder_split else {}) \
-            | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {})
+            | ({"encoder_channels": encoder_channels} if encoder_channels != 12 else {}) \
+            | ({"encoder_hidden": encoder_hidden} if encoder_hidden != KEYPOINT_HIDDEN else {})
         super().__init__(dict(input_kind=input_kind, out_dim=out_dim, latent=latent,
                               feature_dim=feature_dim, decoder_hidden=decoder_hidden,
                               dropout_p=dropout_p, image_downsample=image_downsample,
                               target_offset=float(target_offset), target_scale=float(target_scale),
                               **extra))
         self.latent, self.readout = latent, readout
-        self.encoder = make_encoder(input_kind, feature_dim, image_downsample, encoder_channels)
+        self.encoder = make_encoder(input_kind, feature_dim, image_downsample, encoder_channels, encoder_hidden)
         self.heads = ObservationHeads(feature_dim, latent, noise_head, normalise=readout == "decoder",
                                       log_r_range=LOG_R_RANGE if readout == "decoder" else OUTPUT_LOG_R_RANGE)
         self.decoder = Decoder(2 * latent, out_dim, decoder_hidden, dropout_p, target_offset, target_scale,

@@ -259,6 +259,33 @@ def inference_benchmark(n_samples: int = 25, batch_sizes=(1, 16, 256), threads=(
     return add_ratios(pd.DataFrame(rows))
 
 
+def paired_rounds(n_samples: int, rounds: int, threads: int = 1, device: str = "cpu", seed: int = 0,
+                  block_s: float = 0.02) -> pd.DataFrame:
+    """Claim C6's pair timed round by round: Monoloco as published and the DRF with S sequential decoder passes,
+    pedestrians, batch 1, in ``rounds`` interleaved rounds (``interleaved_times``: a block of about ``block_s``
+    seconds of each per round, the order rotated), so each round's ratio is paired: a slow spell of the machine
+    hits both sides of it. One row per round: round, monoloco_ms, drf_ms (per frame) and ratio = Monoloco / DRF.
+    """
+    from drfkit.methods.timing.clock import interleaved_times, torch_threads
+
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 2:
+        raise ValueError(f"paired rounds must be an integer >= 2 (an interval needs two), got {rounds!r}")
+    frames = example_frames("pedestrians", 1, 2, seed, device)
+    first, frame = frames[:, :1], frames[:, 1:]
+    fns = {}
+    for kind, mode in (("monoloco", "published"), ("drf", "sequential")):
+        model = build_timing_model(kind, "pedestrians", mode, seed, device)
+        with torch.inference_mode():
+            carry = model.initial_carry(first)
+        fns[kind] = make_frame_fn(model, mode, frame, carry, n_samples)
+    # min_run_time ~0: exactly ``rounds`` rounds, whatever a block costs on this machine
+    with torch_threads(threads), torch.inference_mode():
+        per_round = interleaved_times(fns, min_run_time=1e-9, block_s=block_s, min_rounds=rounds)
+    mono, drf = (np.asarray(per_round[k]) * 1e3 for k in ("monoloco", "drf"))
+    return pd.DataFrame({"round": np.arange(rounds), "monoloco_ms": mono, "drf_ms": drf, "ratio": mono / drf,
+                         "threads": threads, "device": device, "n_samples": n_samples})
+
+
 def inference_benchmark_with_load(*args, **kwargs) -> tuple[float, pd.DataFrame, float]:
     """``(load before, inference_benchmark(*args, **kwargs), load after)``: the machine's 1-minute
     load average around the run, kept with its table (a reused measurement keeps its own loads)."""

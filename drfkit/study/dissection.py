@@ -18,7 +18,8 @@ from drfkit.data.pendulum import blackout_frames
 from drfkit.methods import dissection as dis
 from drfkit.study import studies
 from drfkit.study.dynamics import blackout_split, dropout_off_point
-from drfkit.util.progress import steps
+from drfkit.util.tasks import forget, map_tasks, memo
+from drfkit.models.portable import portable
 
 # (a3) the gain clamped on the first k gap frames: the first sequences of the scored split (enough for a curve)
 PARTIAL_CLAMP_SEQUENCES = 200
@@ -95,76 +96,90 @@ def dissect_filters(P, models: dict[tuple[str, int], Any], split: str = "test"
       model at the highest noise, else 'filtering'); no_dynamics' mae_ood (mean over its seeds, NaN without one);
     * gains: one row per (model, seed, set in {'ood', 'blackout'}, level bin) of ``dissection.oracle_gain_table``
       beside the model's own mean gain there ('model_gain', on its observed block)."""
-    train_level = P.pendulum.train_max_noise
-    ood_level = max(P.pendulum.eval_max_noise)
-    sets = {"train": studies.pendulum_split(P, split, train_level),
-            "ood": studies.pendulum_split(P, split, ood_level),
-            "blackout": blackout_split(P, split)}
+    forget()
+    sets = _sets(P, split)  # read (made, the first time) here once: workers only read them
+    nd = [_dropout_off_mae(m, sets["ood"]) for (kind, _), m in models.items() if kind == "no_dynamics"]
+    nd_ood = float(np.mean(nd)) if nd else float("nan")
+    filters = [key for key, m in models.items() if hasattr(m, "filter_internals")]
+    parts = map_tasks(_dissect_one, [(P, split, kind, seed, nd_ood) for kind, seed in filters],
+                      shared=portable({key: models[key] for key in filters}), desc="dissecting the filters")
+    return tuple(pd.DataFrame([row for part in parts for row in part[i]]) for i in range(4))
+
+
+def _sets(P, split: str) -> dict[str, dict[str, np.ndarray]]:
+    """The dissection's three sets of ``split``: at the training noise, at the highest evaluation noise and the
+    blackout set (read once per process, ``tasks.memo``)."""
+    return memo((P, "dissection sets", split), lambda: {
+        "train": studies.pendulum_split(P, split, P.pendulum.train_max_noise),
+        "ood": studies.pendulum_split(P, split, max(P.pendulum.eval_max_noise)),
+        "blackout": blackout_split(P, split)})
+
+
+def _dissect_one(P, split: str, kind: str, seed: int, nd_ood: float, shared: dict) -> tuple[list, list, list, list]:
+    """``dissect_filters``' rows of one filter (a task of ``map_tasks``): (calibration, [intervention], horizons,
+    gains)."""
+    model, sets = shared[(kind, seed)].model, _sets(P, split)
+    train_level, ood_level = P.pendulum.train_max_noise, max(P.pendulum.eval_max_noise)
     dark = sets["blackout"]
     start, stop = blackout_frames(dark["images"].shape[1])
     targets = dark["targets"].astype(np.float64)
-    nd = [_dropout_off_mae(m, sets["ood"]) for (kind, _), m in models.items() if kind == "no_dynamics"]
-    nd_ood = float(np.mean(nd)) if nd else float("nan")
-    calibration, interventions, horizons, gains = [], [], [], []
-    filters = {key: m for key, m in models.items() if hasattr(m, "filter_internals")}
-    for (kind, seed), model in steps(filters.items(), "dissecting the filters", len(filters)):
-        row: dict[str, Any] = {"model": kind, "seed": seed, "train_level": train_level, "ood_level": ood_level}
-        prepared, traces = {}, {}
-        for name, arrays in sets.items():
-            prepared[name] = _prepared(model, arrays)
-            traces[name] = dis.filter_pass(model, *prepared[name], arrays["targets"])
-            for cal in dis.calibration_table(traces[name], arrays["noise"]):
-                calibration.append({"model": kind, "seed": seed, "set": name, **cal})
-        row["mae_train"] = float(traces["train"]["abs_err"].mean())
-        row["mae_ood"] = float(traces["ood"]["abs_err"].mean())
-        row["mae_blackout"] = float(traces["blackout"]["abs_err"][:, start:stop].mean())
-        as_run = traces["blackout"]
-        w, r, truth = prepared["blackout"]
-        curve, row["clamped_gain_max"] = open_loop(model, prepared["blackout"], targets, as_run, start, stop)
-        curve |= {name: dis.per_horizon(err, start, stop - start) for name, err in (
-            ("mae_as_run", as_run["abs_err"]), ("angle_as_run", dis.angle_error(as_run["mean"], targets)),
-            ("mae_as_run_ordinary", traces["train"]["abs_err"]))}
-        # (b) the oracle gain at the highest noise and on the blackout
-        for name in ("ood", "blackout"):
-            out, table = _oracle_pass(model, sets[name], prepared[name], traces[name])
-            own_gain = traces[name]["gain"][:, 1:]
-            bins = dis.level_bins(sets[name]["noise"])[:, 1:]
-            for g in table:
-                b = np.iinfo(np.int32).max if g["level_lo"] >= 1.0 else int(round(g["level_lo"] / dis.LEVEL_BIN))
-                gains.append({"model": kind, "seed": seed, "set": name, **g,
-                              "model_gain": float(own_gain[bins == b].mean())})
-            if name == "ood":
-                row["mae_ood_oracle_gain"] = float(out["abs_err"].mean())
-            else:
-                row["mae_blackout_oracle_gain"] = float(out["abs_err"][:, start:stop].mean())
-                curve["mae_oracle_gain"] = dis.per_horizon(out["abs_err"], start, stop - start)
-        # (a3) only the first k gap frames clamped, the own gain after
-        few = slice(0, min(PARTIAL_CLAMP_SEQUENCES, w.shape[0]))
-        partial, after = [], []
-        for k in range(1, stop - start + 1):
-            gain = dis.forced_gain((few.stop, w.shape[1]), start, start + k)
-            try:
-                out = dis.filter_pass(model, w[few], r[few], truth[few], targets[few], float64=True, gain=gain,
-                                      log_var=dis.held_variance(as_run["log_var"][few], start, start + k,
-                                                                elsewhere=np.nan))
-            except ValueError:  # k expanding steps left a P that the own update cannot factor: NaN, not a number
-                partial.append(np.nan), after.append(np.nan)
-                continue
-            dis.check_clamped(out, gain)
-            partial.append(float(out["abs_err"][:, start:stop].mean()))
-            after.append(float(out["abs_err"][:, stop:stop + (stop - start)].mean()))
-        verdicts = dis.horizon_verdicts(curve["mae_clamped"], curve["mae_as_run"], curve["mae_hold"])
-        for h in range(stop - start):
-            horizons.append({"model": kind, "seed": seed, "h": h + 1, **{k: float(v[h]) for k, v in curve.items()},
-                             "mae_gap_partial": partial[h], "mae_after_partial": after[h], "verdict": verdicts[h]})
-        row |= {"mae_blackout_clamped": float(curve["mae_clamped"].mean()),
-                "mae_blackout_hold": float(curve["mae_hold"].mean()),
-                "open_loop_horizon": dis.open_loop_horizon(curve["mae_clamped"], curve["mae_hold"]),
-                "verdict_blackout": dis.verdict_runs(verdicts),
-                "verdict_ood": "gain" if row["mae_ood_oracle_gain"] < row["mae_ood"] else "filtering",
-                "no_dynamics_mae_ood": nd_ood}
-        interventions.append(row)
-    return pd.DataFrame(calibration), pd.DataFrame(interventions), pd.DataFrame(horizons), pd.DataFrame(gains)
+    calibration, horizons, gains = [], [], []
+    row: dict[str, Any] = {"model": kind, "seed": seed, "train_level": train_level, "ood_level": ood_level}
+    prepared, traces = {}, {}
+    for name, arrays in sets.items():
+        prepared[name] = _prepared(model, arrays)
+        traces[name] = dis.filter_pass(model, *prepared[name], arrays["targets"])
+        for cal in dis.calibration_table(traces[name], arrays["noise"]):
+            calibration.append({"model": kind, "seed": seed, "set": name, **cal})
+    row["mae_train"] = float(traces["train"]["abs_err"].mean())
+    row["mae_ood"] = float(traces["ood"]["abs_err"].mean())
+    row["mae_blackout"] = float(traces["blackout"]["abs_err"][:, start:stop].mean())
+    as_run = traces["blackout"]
+    w, r, truth = prepared["blackout"]
+    curve, row["clamped_gain_max"] = open_loop(model, prepared["blackout"], targets, as_run, start, stop)
+    curve |= {name: dis.per_horizon(err, start, stop - start) for name, err in (
+        ("mae_as_run", as_run["abs_err"]), ("angle_as_run", dis.angle_error(as_run["mean"], targets)),
+        ("mae_as_run_ordinary", traces["train"]["abs_err"]))}
+    # (b) the oracle gain at the highest noise and on the blackout
+    for name in ("ood", "blackout"):
+        out, table = _oracle_pass(model, sets[name], prepared[name], traces[name])
+        own_gain = traces[name]["gain"][:, 1:]
+        bins = dis.level_bins(sets[name]["noise"])[:, 1:]
+        for g in table:
+            b = np.iinfo(np.int32).max if g["level_lo"] >= 1.0 else int(round(g["level_lo"] / dis.LEVEL_BIN))
+            gains.append({"model": kind, "seed": seed, "set": name, **g,
+                          "model_gain": float(own_gain[bins == b].mean())})
+        if name == "ood":
+            row["mae_ood_oracle_gain"] = float(out["abs_err"].mean())
+        else:
+            row["mae_blackout_oracle_gain"] = float(out["abs_err"][:, start:stop].mean())
+            curve["mae_oracle_gain"] = dis.per_horizon(out["abs_err"], start, stop - start)
+    # (a3) only the first k gap frames clamped, the own gain after
+    few = slice(0, min(PARTIAL_CLAMP_SEQUENCES, w.shape[0]))
+    partial, after = [], []
+    for k in range(1, stop - start + 1):
+        gain = dis.forced_gain((few.stop, w.shape[1]), start, start + k)
+        try:
+            out = dis.filter_pass(model, w[few], r[few], truth[few], targets[few], float64=True, gain=gain,
+                                  log_var=dis.held_variance(as_run["log_var"][few], start, start + k,
+                                                            elsewhere=np.nan))
+        except ValueError:  # k expanding steps left a P that the own update cannot factor: NaN, not a number
+            partial.append(np.nan), after.append(np.nan)
+            continue
+        dis.check_clamped(out, gain)
+        partial.append(float(out["abs_err"][:, start:stop].mean()))
+        after.append(float(out["abs_err"][:, stop:stop + (stop - start)].mean()))
+    verdicts = dis.horizon_verdicts(curve["mae_clamped"], curve["mae_as_run"], curve["mae_hold"])
+    for h in range(stop - start):
+        horizons.append({"model": kind, "seed": seed, "h": h + 1, **{k: float(v[h]) for k, v in curve.items()},
+                         "mae_gap_partial": partial[h], "mae_after_partial": after[h], "verdict": verdicts[h]})
+    row |= {"mae_blackout_clamped": float(curve["mae_clamped"].mean()),
+            "mae_blackout_hold": float(curve["mae_hold"].mean()),
+            "open_loop_horizon": dis.open_loop_horizon(curve["mae_clamped"], curve["mae_hold"]),
+            "verdict_blackout": dis.verdict_runs(verdicts),
+            "verdict_ood": "gain" if row["mae_ood_oracle_gain"] < row["mae_ood"] else "filtering",
+            "no_dynamics_mae_ood": nd_ood}
+    return calibration, [row], horizons, gains
 
 
 # the calibrated-gain screen's rule, written before its runs (docs/dynamics.md)

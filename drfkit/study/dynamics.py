@@ -29,10 +29,13 @@ from drfkit.study import studies
 from drfkit.core.metrics import bootstrap_interval
 from drfkit.data.noise import Noise
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
-from drfkit.methods.diagnostics import abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary
+from drfkit.methods.diagnostics import (abs_error_per_frame, blackout_summary, filter_trace, mechanism_summary,
+                                       recovery_summary)
 from drfkit.util.paths import predictions_dir
 from drfkit.methods.predictions import point_and_sigma
 from drfkit.util.progress import steps
+from drfkit.util.tasks import forget, map_tasks, memo
+from drfkit.models.portable import portable
 
 
 
@@ -53,37 +56,61 @@ def _point_and_sigma(P, model, arrays, seed: int) -> tuple[np.ndarray, np.ndarra
 def mechanism_table(P, models: dict[tuple[str, int], Any], noise: Noise | float, split: str = "test") -> pd.DataFrame:
     """One row per (model, seed): diagnostics on ``split`` at max noise ``noise`` (a pendulum
     ``Noise`` or its level) and the gains on the blackout version of ``split``'s clean and
-    pure-noise frames."""
+    pure-noise frames. One task per model (``drfkit.util.tasks.map_tasks``)."""
     noise = studies.study_noise(P, "pendulum", noise).level
-    test, dark = studies.pendulum_split(P, split, noise), blackout_split(P, split)
-    rows = []
-    for (kind, seed), model in steps(models.items(), f"mechanism checks at max noise {noise:g}", len(models)):
-        row = {"model": kind, "seed": seed, "noise": float(noise),
-               **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
-        if hasattr(model, "filter_diagnostics"):  # a filter: its gain on the blackout's clean and pure-noise frames
-            on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
-            row |= {f"{k}_blackout": on_dark[k] for k in ("gain_clean", "gain_pure", "gain_ratio")}
-        rows.append(row)
+    forget()
+    _split(P, split, noise), _dark(P, split)  # read (made, the first time) here once: workers only read them
+    rows = map_tasks(_mechanism_task, [(P, split, noise, kind, seed) for kind, seed in models], shared=portable(models),
+                     desc=f"mechanism checks at max noise {noise:g}")
     return pd.DataFrame(rows)
+
+
+def _split(P, split: str, noise: float) -> dict[str, np.ndarray]:
+    return memo((P, "pendulum split", split, noise), lambda: studies.pendulum_split(P, split, noise))
+
+
+def _dark(P, split: str) -> dict[str, np.ndarray]:
+    return memo((P, "blackout split", split), lambda: blackout_split(P, split))
+
+
+def _mechanism_task(P, split: str, noise: float, kind: str, seed: int, shared: dict) -> dict[str, Any]:
+    model, test = shared[(kind, seed)].model, _split(P, split, noise)
+    row = {"model": kind, "seed": seed, "noise": float(noise),
+           **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
+    if hasattr(model, "filter_diagnostics"):  # a filter: its gain on the blackout's clean and pure-noise frames
+        dark = _dark(P, split)
+        on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
+        row |= {f"{k}_blackout": on_dark[k] for k in ("gain_clean", "gain_pure", "gain_ratio")}
+    return row
 
 
 def blackout_curves(P, models: dict[tuple[str, int], Any], split: str = "test") -> pd.DataFrame:
-    """MAE per frame of every (model, seed) on the blackout set of ``split``: columns model, seed, frame, mae."""
-    dark = blackout_split(P, split)
-    rows = []
-    for (kind, seed), model in steps(models.items(), "blackout curves", len(models)):
-        mean, _ = _point_and_sigma(P, model, dark, seed)
-        for frame, err in enumerate(abs_error_per_frame(mean, dark["targets"])):
-            rows.append({"model": kind, "seed": seed, "frame": frame, "mae": float(err)})
-    return pd.DataFrame(rows)
+    """MAE per frame of every (model, seed) on the blackout set of ``split``: columns model, seed, frame, mae.
+    One task per model (``drfkit.util.tasks.map_tasks``)."""
+    forget()
+    _dark(P, split)
+    per_model = map_tasks(_blackout_task, [(P, split, kind, seed) for kind, seed in models], shared=portable(models),
+                          desc="blackout curves")
+    return pd.DataFrame([row for rows in per_model for row in rows])
+
+
+def _blackout_task(P, split: str, kind: str, seed: int, shared: dict) -> list[dict[str, Any]]:
+    dark = _dark(P, split)
+    mean, _ = _point_and_sigma(P, shared[(kind, seed)].model, dark, seed)
+    return [{"model": kind, "seed": seed, "frame": frame, "mae": float(err)}
+            for frame, err in enumerate(abs_error_per_frame(mean, dark["targets"]))]
 
 
 def blackout_table(curves: pd.DataFrame) -> pd.DataFrame:
-    """Per model and seed: MAE on the blackout frames and on the 15 after (from ``blackout_curves``)."""
+    """Per model and seed: MAE on the blackout frames and on the 15 after (``blackout_summary``) and the
+    recovery (``recovery_summary``: the before-gap MAE, after / before, frames until back within 1.5x), from
+    ``blackout_curves``."""
     rows = []
     for (kind, seed), run in curves.groupby(["model", "seed"], sort=False):
         per_frame = run.sort_values("frame")["mae"].to_numpy()
-        rows.append({"model": kind, "seed": seed, **blackout_summary(per_frame, blackout_frames(per_frame.size))})
+        frames = blackout_frames(per_frame.size)
+        rows.append({"model": kind, "seed": seed, **blackout_summary(per_frame, frames),
+                     **recovery_summary(per_frame, frames)})
     return pd.DataFrame(rows)
 
 
@@ -169,7 +196,8 @@ def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, 
     wide = evals.pivot_table(index=["model", "seed"], columns="noise", values="mae")
     wide.columns = [f"mae_{c:g}" for c in wide.columns]
     mech = mechanism.set_index(["model", "seed"]).reindex(columns=list(PROTOCOL_COLUMNS))
-    out = wide.join(dark.set_index(["model", "seed"])[["mae_blackout", "mae_after_blackout"]]).join(mech)
+    dark_cols = [c for c in ("mae_blackout", "mae_after_blackout", "recovery_ratio", "frames_to_recover") if c in dark]
+    out = wide.join(dark.set_index(["model", "seed"])[dark_cols]).join(mech)
     out = out.reset_index().assign(protocol=protocol, pure_noise_training=pure_noise_training or "",
                                    mae_blackout_chance=chance)
     return out[["protocol", "model", "seed", *[c for c in out.columns if c not in ("protocol", "model", "seed")]]]

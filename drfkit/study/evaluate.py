@@ -19,6 +19,8 @@ from drfkit.core.metrics import prediction_metrics, t975  # noqa: F401 (defined 
 from drfkit.util.paths import predictions_dir
 from drfkit.methods.predictions import EVAL_BATCH_SIZE, cached_predict_rates
 from drfkit.util.progress import steps
+from drfkit.util.tasks import forget, map_tasks, memo
+from drfkit.models.portable import portable
 from drfkit.methods.train import SequenceData
 
 METRICS = ("mae", "picp", "mpiw", "nll", "crps", "cal_error")
@@ -123,21 +125,41 @@ def evaluate_study(P, study: str, noise_levels: Iterable[float], dropout_rates: 
         raise ValueError(f"evaluate_study: the test levels {noise_levels} name a level twice; pass each level once "
                          f"(e.g. sorted({{train_level, *eval_levels}}))")
     models = models if models is not None else studies.trained_models(P, study)
-    device = studies.pick_device(P.device)
-    rows = []
-    for noise in steps(noise_levels, f"{study}: {len(models)} models at {len(noise_levels)} test levels"):
-        data = first_sequences(studies.study_data(P, study, "test", noise), (sequences or {}).get(noise))
-        for (kind, seed), model in models.items():  # the dropout masks of MC sampling are part of the seed
-            results = evaluate_model_rates(model, data, n_samples=P.uncertainty.n_samples, dropout_rates=list(dropout_rates),
-                                           level=P.uncertainty.interval_level, device=device, seed=seed,
-                                           cache=predictions_dir(P.profile),
-                                           sigma_scale=1.0 if sigma_scales is None else sigma_scales[(kind, seed)])
-            for p, m in zip(dropout_rates, results):
-                rows.append({"study": study, "model": kind, "seed": seed, "noise": float(noise),
-                             "dropout_p": model.default_dropout_p if p is None else float(p), **m,
-                             "sequences": len(data)}
-                            | ({} if sigma_scales is None else {"sigma_scale": sigma_scales[(kind, seed)]}))
+    scales = {key: 1.0 if sigma_scales is None else sigma_scales[key] for key in models}
+    items = [(P, study, noise, (sequences or {}).get(noise), kind, seed, list(dropout_rates), scales[(kind, seed)])
+             for noise in noise_levels for kind, seed in models]
+    # each level's test set read (made, the first time) here, once: the tasks in this process reuse it, and
+    # workers only read files that exist (no two processes make one set)
+    forget()
+    for noise in noise_levels:
+        _test_set(P, study, noise, (sequences or {}).get(noise))
+    per_task = map_tasks(_evaluate_task, items, shared=portable(models),
+                         desc=f"{study}: {len(models)} models at {len(noise_levels)} test levels")
+    rows = [row | ({} if sigma_scales is None else {"sigma_scale": scales[(row["model"], row["seed"])]})
+            for task_rows in per_task for row in task_rows]
     return pd.DataFrame(rows)
+
+
+def _test_set(P, study: str, noise: float, n: int | None) -> SequenceData:
+    """A level's test set (its first ``n`` sequences), read once per process (``tasks.memo``)."""
+    from drfkit.study import studies
+
+    return memo((P, "test set", study, noise, n),
+                lambda: first_sequences(studies.study_data(P, study, "test", noise), n))
+
+
+def _evaluate_task(P, study: str, noise: float, n: int | None, kind: str, seed: int, dropout_rates: list,
+                   sigma_scale: float, shared: dict) -> list[dict[str, Any]]:
+    """One (model, seed) at one test level: ``evaluate_study``'s rows of it (a task of ``map_tasks``)."""
+    from drfkit.study import studies
+
+    model, data = shared[(kind, seed)].model, _test_set(P, study, noise, n)
+    results = evaluate_model_rates(model, data, n_samples=P.uncertainty.n_samples, dropout_rates=dropout_rates,
+                                   level=P.uncertainty.interval_level, device=studies.pick_device(P.device), seed=seed,
+                                   cache=predictions_dir(P.profile), sigma_scale=sigma_scale)
+    return [{"study": study, "model": kind, "seed": seed, "noise": float(noise),
+             "dropout_p": model.default_dropout_p if p is None else float(p), **m, "sequences": len(data)}
+            for p, m in zip(dropout_rates, results)]
 
 
 def first_sequences(data: SequenceData, n: int | None) -> SequenceData:
@@ -185,17 +207,29 @@ def _value_mask(data: SequenceData):
 
 def uncertainty_scales(P, study: str, models: dict, protocol: str = "paper") -> dict[tuple[str, int], float]:
     """(kind, seed) -> s: the one-scalar recalibration of each model's predictive sigma (MC dropout at its own
-    rate, ``drfkit.methods.calibration.sigma_scale``), fitted on the VALIDATION split at the training noise only."""
+    rate, ``drfkit.methods.calibration.sigma_scale``), fitted on the VALIDATION split at the training noise only.
+    One task per model (``drfkit.util.tasks.map_tasks``)."""
+    forget()
+    _val_set(P, study, protocol)
+    keys = list(models)
+    scales = map_tasks(_scale_task, [(P, study, protocol, kind, seed) for kind, seed in keys], shared=portable(models),
+                       desc=f"{study}: sigma scales on validation")
+    return dict(zip(keys, scales))
+
+
+def _val_set(P, study: str, protocol: str) -> SequenceData:
+    from drfkit.study import studies
+
+    return memo((P, "val set", study, protocol), lambda: studies.study_data(P, study, "val", protocol=protocol))
+
+
+def _scale_task(P, study: str, protocol: str, kind: str, seed: int, shared: dict) -> float:
     from drfkit.methods.calibration import sigma_scale
     from drfkit.study import studies
 
-    val = studies.study_data(P, study, "val", protocol=protocol)
-    device = studies.pick_device(P.device)
-    out = {}
-    for (kind, seed), model in models.items():
-        pred = _prediction(P, model, val, seed, device)
-        out[(kind, seed)] = sigma_scale(val.targets.numpy(), pred.mean.numpy(), pred.total.numpy(), _value_mask(val))
-    return out
+    val = _val_set(P, study, protocol)
+    pred = _prediction(P, shared[(kind, seed)].model, val, seed, studies.pick_device(P.device))
+    return sigma_scale(val.targets.numpy(), pred.mean.numpy(), pred.total.numpy(), _value_mask(val))
 
 
 def calibration_table(P, study: str, noise_levels: Iterable[float], models: dict, scales: dict[tuple[str, int], float],
@@ -204,24 +238,29 @@ def calibration_table(P, study: str, noise_levels: Iterable[float], models: dict
     levels, their widths, the NLL and the calibration error (``drfkit.methods.calibration.calibration_summary``) of
     the MC-dropout predictive Gaussian at the model's own rate, 'as trained' and 'recalibrated' (every sigma times
     the model's validation ``scales``); beside them the dropout-off MAE and RMSE and the mean aleatoric and
-    epistemic sigma. ``sequences`` as ``evaluate_study``'s (the same cache entries)."""
+    epistemic sigma. ``sequences`` as ``evaluate_study``'s (the same cache entries). One task per (model, level)."""
+    levels = [float(v) for v in noise_levels]
+    forget()
+    for noise in levels:
+        _test_set(P, study, noise, (sequences or {}).get(noise))
+    items = [(P, study, noise, (sequences or {}).get(noise), kind, seed, scales[(kind, seed)])
+             for noise in levels for kind, seed in models]
+    per_task = map_tasks(_calibration_task, items, shared=portable(models), desc=f"{study}: calibration at {len(levels)} test levels")
+    return pd.DataFrame([row for rows in per_task for row in rows])
+
+
+def _calibration_task(P, study: str, noise: float, n: int | None, kind: str, seed: int, scale: float,
+                      shared: dict) -> list[dict[str, Any]]:
     from drfkit.methods.calibration import calibration_summary
     from drfkit.study import studies
 
-    device = studies.pick_device(P.device)
-    rows = []
-    levels = [float(v) for v in noise_levels]
-    for noise in steps(levels, f"{study}: calibration at {len(levels)} test levels"):
-        data = first_sequences(studies.study_data(P, study, "test", noise), (sequences or {}).get(noise))
-        mask, y = _value_mask(data), data.targets.numpy()
-        for (kind, seed), model in models.items():
-            pred = _prediction(P, model, data, seed, device)
-            point = pred.point.numpy()
-            err = (point - y) if mask is None else (point - y)[mask]
-            base = {"study": study, "model": kind, "seed": seed, "noise": noise, "mae": float(np.abs(err).mean()),
-                    "rmse": float(np.sqrt(np.mean(np.square(err)))),
-                    "aleatoric": float(pred.aleatoric.mean()), "epistemic": float(pred.epistemic.mean())}
-            for name, s in (("as trained", 1.0), ("recalibrated", scales[(kind, seed)])):
-                rows.append(base | {"intervals": name} | calibration_summary(y, pred.mean.numpy(), pred.total.numpy(),
-                                                                           mask, scale=s))
-    return pd.DataFrame(rows)
+    data = _test_set(P, study, noise, n)
+    mask, y = _value_mask(data), data.targets.numpy()
+    pred = _prediction(P, shared[(kind, seed)].model, data, seed, studies.pick_device(P.device))
+    point = pred.point.numpy()
+    err = (point - y) if mask is None else (point - y)[mask]
+    base = {"study": study, "model": kind, "seed": seed, "noise": noise, "mae": float(np.abs(err).mean()),
+            "rmse": float(np.sqrt(np.mean(np.square(err)))),
+            "aleatoric": float(pred.aleatoric.mean()), "epistemic": float(pred.epistemic.mean())}
+    return [base | {"intervals": name} | calibration_summary(y, pred.mean.numpy(), pred.total.numpy(), mask, scale=s)
+            for name, s in (("as trained", 1.0), ("recalibrated", scale))]

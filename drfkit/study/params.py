@@ -58,7 +58,7 @@ NOTEBOOKS: dict[str, list[str]] = {
     "03_nuscenes_training": _COMMON + _PED_DATA + _PED_TRAIN + _UNC,
     "04_ood_noise_evaluation": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC
                                + ["limit_sequences", "limit_particles", "pend_sweep_sequences"],
-    "05_timing": _COMMON + ["n_samples"] + _TIMING + _PEND_DATA + _PEND_TRAIN,
+    "05_timing": _COMMON + ["n_samples"] + _TIMING + ["timing_paired_rounds"] + _PEND_DATA + _PEND_TRAIN,
     "06_competency_gating": _COMMON + _EVAL + _PEND_DATA + _PEND_TRAIN + _PED_DATA + _PED_TRAIN + _UNC + _GATING,
 }
 

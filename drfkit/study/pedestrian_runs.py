@@ -42,6 +42,13 @@ DATA_FIELDS = {name: name.removeprefix("ped_") for name in (
     "ped_frames_per_scene", "ped_train_p", "ped_seq_len", "ped_data_seed", "sim_detector")}
 
 
+# One attempt at closing the DRF family's gap to the input-matched Monoloco in distribution (notebook 03): the
+# family's keypoint encoder (53 -> 128 -> 64, 23 k weights in no_dynamics) at about Monoloco's width (412 k weights,
+# 256 wide): hidden 512, features 256, decoder 256 (no_dynamics 191 k, the DRF 309 k). A diagnostic variant of the
+# paper protocol's runs (``studies.train_models(..., options=WIDE_KEYPOINT_MODELS)``), not a protocol of the study.
+WIDE_KEYPOINT_MODELS = {"encoder_hidden": 512, "feature_dim": 256, "decoder_hidden": 256}
+
+
 def load_simulated_pedestrians(
     cache_dir: str | os.PathLike,
     noise: Noise,

@@ -221,6 +221,9 @@ SCHEMA = Section("", {
         "batch_sizes": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
         "threads": Spec(list[int], "a non-empty list of integers >= 1", lambda v: len(v) > 0 and min(v) >= 1),
         "min_run_time": Spec(float, "seconds > 0 per measurement", lambda v: v > 0),
+        "paired_rounds": Spec(int, "an integer >= 2", lambda v: v >= 2,
+                              "interleaved rounds of claim C6's pair (Monoloco as published, the DRF's sequential "
+                              "passes; batch 1, one thread): the claim's interval is over the per-round ratios"),
     }),
     "gating": Section("gating_", {
         "picp_tolerance": Spec(float, "a number in [0, 1] (fraction, e.g. 0.01 = 1 point)", _in01),

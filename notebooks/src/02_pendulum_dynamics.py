@@ -224,7 +224,10 @@ for _, r in paper_check.iterrows():
 # ## Blackout: does the state coast?
 # MAE per frame (dropout off) through the blackout: a filter that carries the motion forward
 # keeps a low error on the pure-noise frames and recovers at once after them; a model without a
-# state falls to guessing (predicting (0, 0) scores about 0.64).
+# state falls to guessing (predicting (0, 0) scores about 0.64). The recovery is its own number
+# (`drfkit.methods.diagnostics.recovery_summary`): the MAE on the 15 frames after the gap over the
+# model's own MAE on the 15 ordinary frames before it (1 = back where it was), and the frames it
+# takes to come back within 1.5x of that.
 
 # %%
 from drfkit.data.pendulum import blackout_frames
@@ -240,7 +243,7 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-dark_table.groupby("model")[["mae_blackout", "mae_after_blackout"]].mean().round(4)
+dark_table.groupby("model")[["mae_blackout", "mae_after_blackout", "recovery_ratio", "frames_to_recover"]].mean().round(4)
 
 # %% [markdown]
 # ## Which protocol makes the DRF filter? An ablation on validation data

@@ -42,5 +42,35 @@ def monoloco_inputs_reading(summary: pd.DataFrame, level: float) -> dict[str, An
                                     f"{100 * share:.0f} % of the gap: the gap is mostly {cause}."}
 
 
+# The DRF family at about Monoloco's width (``drfkit.study.pedestrian_runs.WIDE_KEYPOINT_MODELS``): its rows' names
+WIDE_SUFFIX = "_monoloco_width"
+# the share of the family's gap to the input-matched Monoloco that the width must close to be called the bottleneck
+WIDTH_SHARE = 0.5
+
+
+def encoder_width_reading(summary: pd.DataFrame, level: float) -> dict[str, Any]:
+    """summary: ``summarise`` by model, noise with rows no_dynamics, drf, their ``WIDE_SUFFIX`` versions and
+    ``MATCHED_MONOLOCO``. In distribution (``level``): the share of no_dynamics' gap to the input-matched Monoloco
+    (the family's encoder alone, frame by frame, against a wider per-frame network on the same inputs) that the
+    encoder at Monoloco's width closes, and what the recurrence adds at that width. Returns the share and a
+    sentence; at least ``WIDTH_SHARE`` calls the width the bottleneck."""
+    mae = summary[(summary["noise"] - level).abs() < 1e-9].set_index("model")["mae"]
+    fed, nd, nd_wide = (float(mae[m]) for m in (MATCHED_MONOLOCO, "no_dynamics", "no_dynamics" + WIDE_SUFFIX))
+    drf_wide = float(mae.get("drf" + WIDE_SUFFIX, float("nan")))
+    pct = lambda v: f"{100 * (v / fed - 1):+.0f} %"  # noqa: E731
+    recurrence = (f"; the DRF at that width {drf_wide:.3g} m ({100 * (drf_wide / nd_wide - 1):+.0f} % against its "
+                  "encoder alone)" if drf_wide == drf_wide else "")
+    if nd <= fed:
+        return {"share": float("nan"), "text": f"At p = {level:g} the family's encoder alone ({nd:.3g} m) is no worse "
+                                               f"than the input-matched Monoloco ({fed:.3g} m): no gap to explain."}
+    share = (nd - nd_wide) / (nd - fed)
+    cause = ("the encoder's width" if share >= WIDTH_SHARE else
+             "not the encoder's width: the family's per-frame network or recipe")
+    return {"share": share, "text": f"At p = {level:g} the input-matched Monoloco is at {fed:.3g} m; the DRF family's "
+                                    f"encoder alone (no_dynamics) at {nd:.3g} m ({pct(nd)}), at Monoloco's width "
+                                    f"{nd_wide:.3g} m ({pct(nd_wide)}){recurrence}. The width closes "
+                                    f"{100 * share:.0f} % of the encoder's gap: the bottleneck is {cause}."}
+
+
 __all__ = ["MATCHED_MONOLOCO", "PUBLISHED_MONOLOCO", "MONOLOCO_NAMES", "monoloco_name", "INPUTS_SHARE",
-           "monoloco_inputs_reading"]
+           "monoloco_inputs_reading", "WIDE_SUFFIX", "WIDTH_SHARE", "encoder_width_reading"]

@@ -15,7 +15,9 @@ REPRODUCED, PARTLY, NOT = "reproduced", "partly", "not reproduced"
 NOT_TESTABLE = "not testable"  # the data cannot decide (e.g. even a perfect gate could not be told from random)
 BETTER = "better than the paper's parity"  # a parity claim (C4) where the DRF is far better, not equal
 INCONCLUSIVE = "inconclusive"  # an equivalence claim whose interval is too wide to say equal or not (C4)
-VERDICTS = (REPRODUCED, PARTLY, NOT, NOT_TESTABLE, BETTER, INCONCLUSIVE)
+DIFFERENT_FACTOR = "a different factor"  # a factor claim (C6) whose interval lies wholly outside the paper's band
+AT_EDGE = "at the band's edge"  # a factor claim whose interval straddles an end of the paper's band
+VERDICTS = (REPRODUCED, PARTLY, NOT, NOT_TESTABLE, BETTER, INCONCLUSIVE, DIFFERENT_FACTOR, AT_EDGE)
 
 # A PICP at or above this is saturated: the 95 % intervals cover (almost) everything, so coverage
 # cannot rank two models there, and differences in the last decimals are noise, not evidence.
@@ -194,6 +196,6 @@ CURVE_RULE = ("a DRF whose curve is one point for every dropout rate (no dropout
               "cover everything cannot be ranked by coverage); not testable if none is left")
 
 
-__all__ = ["NOMINAL_PAIRING", "NOT_RECALIBRATED", "not_recalibrated", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "VERDICTS", "SATURATED_PICP", "at_most",
+__all__ = ["NOMINAL_PAIRING", "NOT_RECALIBRATED", "not_recalibrated", "REPRODUCED", "PARTLY", "NOT", "NOT_TESTABLE", "BETTER", "INCONCLUSIVE", "DIFFERENT_FACTOR", "AT_EDGE", "VERDICTS", "SATURATED_PICP", "at_most",
            "seed_interval", "correlation_interval", "fmt_interval", "cell", "fmt", "paired_difference", "rows_of", "at_levels", "dominance",
            "curve_shares", "share_text", "curve_verdict", "CURVE_RULE", "collapsed_curve", "collapsed_text"]
