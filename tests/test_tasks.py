@@ -108,6 +108,7 @@ def test_the_workers_keep_glibcs_own_trim_threshold(monkeypatch):
     slower per task than in this process; ``local_cluster`` (the evaluation's and the training grid's) drops it."""
     from distributed import Client
 
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")  # what an earlier plain LocalCluster leaves in os.environ
     with tasks.local_cluster(1, dashboard_address=None) as cluster, Client(cluster) as client:
         seen = client.run(_trim_threshold)
     assert list(seen.values()) == [None]

@@ -84,6 +84,9 @@ def task_workers(workers: int | str | None = None) -> int | str:
     return value
 
 
+_DASK_TRIM, _DASK_TRIM_VALUE = "MALLOC_TRIM_THRESHOLD_", "65536"
+
+
 def local_cluster(n_workers: int, **kwargs: Any):
     """A dask.distributed LocalCluster of ``n_workers`` single-threaded worker processes, without Dask's default
     ``MALLOC_TRIM_THRESHOLD_=65536`` for its workers: with it glibc hands freed memory back to the OS after every
@@ -92,7 +95,11 @@ def local_cluster(n_workers: int, **kwargs: Any):
     import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    # a cluster started earlier in this process without this (Dask's own, say) left its value in os.environ, which
+    # every later worker would inherit: drop that value (Dask's, not a user's own setting)
+    if os.environ.get(_DASK_TRIM) == _DASK_TRIM_VALUE:
+        del os.environ[_DASK_TRIM]
+    with dask.config.set({f"distributed.nanny.pre-spawn-environ.{_DASK_TRIM}": None}):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, **kwargs)
 
 
