@@ -19,7 +19,7 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     write_profile(path, values)
     env = {"DRF_RESULTS": str(tmp_path / "results"), "PATH": "/usr/bin:/bin", "CUDA_VISIBLE_DEVICES": ""}
     proc = subprocess.run([sys.executable, "-m", "drfkit", "reproduce", "--profile", str(path),
-                           "--only", "00_data_prep", "05_timing"],
+                           "--only", "00_data_prep", "05_timing", "--workers", "2"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert "FAILED: notebook 00_data_prep" in proc.stderr and "no GPU" in proc.stderr
@@ -29,6 +29,7 @@ def test_pipeline_stops_at_first_failing_notebook_and_names_it(tmp_path):
     assert not (executed / "00_data_prep.ipynb").exists() and not list(executed.glob(".*partial*"))
     manifest = json.loads((tmp_path / "results" / "failing" / "manifest.json").read_text())
     assert manifest["pipeline"]["status"] == "failed in 00_data_prep"
+    assert manifest["pipeline"]["workers"] == "2"  # --workers reaches the environment the kernels inherit
 
 
 
