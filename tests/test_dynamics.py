@@ -259,6 +259,21 @@ def test_the_references_calibration_grid_widens_until_its_choice_is_interior():
     assert edge["sigma_scale"] == 2.0 and not edge["interior"]
 
 
+def test_the_references_outlier_grid_ends_at_zero_a_bound_not_an_edge():
+    # Gaussian observations whose sigma is right: the smallest outlier weight wins, so the grid steps down from
+    # 3e-4 to 0 (no outlier term), a bound of the weight's range, and the choice counts as interior there
+    rng = np.random.default_rng(0)
+    theta, _ = pend._simulate(rng.uniform(-np.pi, np.pi, 12), 30, np.random.default_rng(1))
+    truth = np.stack([np.cos(theta), np.sin(theta)], -1)
+    obs = truth + rng.normal(0.0, 0.1, truth.shape)
+    sigma = np.full(truth.shape, 0.1)
+    cal = references.calibrate_particle_filter(obs, sigma, truth, n_particles=100, seed=0, outliers=(3e-4, 1e-3))
+    assert cal["outlier"] == 0.0 and cal["interior"]
+    edge = references.calibrate_particle_filter(obs, sigma, truth, n_particles=100, seed=0, outliers=(3e-4, 1e-3),
+                                                max_widen=0)
+    assert edge["outlier"] == 3e-4 and not edge["interior"]
+
+
 def test_template_matching_reads_clean_and_noisy_frames():
     theta = np.array([[-2.0, -0.5, 0.3, 1.7, 3.0]])
     clean = pend.render_pendulum(theta)

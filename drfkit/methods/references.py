@@ -130,6 +130,11 @@ def resample_degenerate(w: np.ndarray, log_w: np.ndarray, states: tuple[np.ndarr
     return log_w
 
 
+# below this outlier weight the grid's next step down is 0 (no outlier term): the weight's natural bound, so
+# a filter that does best with no outlier model ends its calibration there rather than at an arbitrary 1e-4
+OUTLIER_FLOOR = 3e-4
+
+
 def calibrate_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, targets: np.ndarray, *,
                               sigma_scales: Iterable[float] = (0.5, 1.0, 2.0),
                               outliers: Iterable[float] = (0.003, 0.01, 0.03), n_particles: int = 200,
@@ -137,8 +142,9 @@ def calibrate_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, targe
     """The (sigma_scale, outlier) with the lowest MAE on VALIDATION estimates and targets (N, T, 2), on a grid
     widened until the choice is interior: while the best value of either sits at its grid's edge, the grid
     grows past that edge (sigma scale halved or doubled, outlier weight divided or multiplied by 3, capped at
-    0.5), at most ``max_widen`` times. 'interior' says whether the choice ended inside both grids (a choice at
-    a corner of the grid would say the grid, not the data, chose it)."""
+    0.5; below ``OUTLIER_FLOOR`` the next step down is 0, no outlier term), at most ``max_widen`` times.
+    'interior' says whether the choice ended inside both grids or on a bound of the outlier weight's range
+    (0 or 0.5): a choice at a grid's arbitrary edge would say the grid, not the data, chose it."""
     scales, outs = sorted(float(v) for v in sigma_scales), sorted(float(v) for v in outliers)
     tried: dict[tuple[float, float], float] = {}
     best: dict[str, Any] = {}
@@ -152,14 +158,17 @@ def calibrate_particle_filter(obs_mean: np.ndarray, obs_sigma: np.ndarray, targe
         (scale, eps), err = min(((k, v) for k, v in tried.items() if k[0] in scales and k[1] in outs),
                                 key=lambda kv: kv[1])
         edge_scale = scale in (scales[0], scales[-1])
-        edge_eps = eps == outs[0] or (eps == outs[-1] and eps < 0.5)
+        edge_eps = (eps == outs[0] and eps > 0.0) or (eps == outs[-1] and eps < 0.5)
         best = {"mae": err, "sigma_scale": scale, "outlier": eps, "interior": not (edge_scale or edge_eps)}
         if best["interior"] or attempt == max_widen:
             break
         if edge_scale:
             scales.insert(0, scale / 2.0) if scale == scales[0] else scales.append(scale * 2.0)
         if edge_eps:
-            outs.insert(0, eps / 3.0) if eps == outs[0] else outs.append(min(eps * 3.0, 0.5))
+            if eps == outs[0]:
+                outs.insert(0, eps / 3.0 if eps / 3.0 >= OUTLIER_FLOOR else 0.0)
+            else:
+                outs.append(min(eps * 3.0, 0.5))
     return best
 
 

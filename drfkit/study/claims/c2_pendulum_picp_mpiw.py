@@ -55,7 +55,7 @@ _EMPTY_CURVE = pd.DataFrame(columns=["model", "noise", "mpiw", "picp", "picp_lo"
 
 
 CLAIM = CLAIMS.register("C2", Claim(
-    "C2", "04_ood_noise_evaluation", "notebook 04, pendulum", "The paper's figures, redrawn", ("ood_picp_mpiw.csv",),
+    "C2", "04_ood_noise_evaluation", "notebook 04, pendulum", "The paper's figures, redrawn", ("ood_picp_mpiw_recalibrated.csv",),
     ("pendulum_picp_mpiw.png",), judge, reads="ood"))
 
 __all__ = ["c2_pendulum_picp_mpiw"]
