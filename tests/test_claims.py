@@ -346,3 +346,35 @@ def test_encoder_width_reading_flips_at_half_the_gap():
     assert "not the encoder's width" in claims.encoder_width_reading(rows(0.8501), 0.01)["text"]
     fine = rows(0.85).assign(mae=[0.9, 0.8, 0.8, 0.8])
     assert "no gap" in claims.encoder_width_reading(fine, 0.01)["text"]
+
+
+def test_a_judged_drf_gets_its_own_rows_and_the_papers_drf_keeps_its_verdict():
+    """F1 under the book protocol with a fifth-round DRF beside the paper's: the paper's DRF (a pass-through) is
+    not reproduced with or without the other's rows, and the other DRF (a filter) is judged in its own row,
+    labelled with its kind, on its own numbers."""
+    from types import SimpleNamespace
+
+    import importlib
+    f1 = importlib.import_module("drfkit.study.claims.f1_filter_mechanism")
+    from drfkit.study.claims.standins import as_drf, label, protocol_words
+
+    def rows(model, rho, ratio, prior):
+        return [{"protocol": "book", "model": model, "seed": s, "r_noise_spearman": rho, "gain_ratio_blackout": ratio,
+                 "prior_ratio": prior} for s in range(3)]
+    table = pd.DataFrame(rows("drf", 0.1, 0.95, 1.5) + rows("drf_calibrated_steep", 0.95, 0.1, 0.5)
+                         + rows("no_dynamics", float("nan"), float("nan"), float("nan")))
+    tables = SimpleNamespace(read=lambda name: table, P=SimpleNamespace(pendulum=SimpleNamespace(eval_max_noise=[0.75])),
+                             judged_drfs=lambda study: ("drf_calibrated_steep", "absent_kind"))
+    judged = dict(f1.judge(tables))
+    assert set(judged) == {"book", label("book", "drf_calibrated_steep")}   # a kind without rows gets none
+    assert judged["book"]["verdict"] == claims.NOT and not judged["book"]["ours"].startswith("drf_calibrated")
+    steep = judged["book: drf_calibrated_steep"]
+    assert steep["verdict"] == claims.REPRODUCED and steep["ours"].startswith("drf_calibrated_steep as the DRF")
+    alone = dict(f1.judge(SimpleNamespace(read=lambda name: table[table["model"] != "drf_calibrated_steep"],
+                                          P=tables.P, judged_drfs=tables.judged_drfs)))
+    assert alone == {"book": judged["book"]}
+    swapped = as_drf(table, "drf_calibrated_steep")
+    assert set(swapped["model"]) == {"drf", "no_dynamics"} and (swapped.loc[swapped["model"] == "drf",
+                                                                           "r_noise_spearman"] == 0.95).all()
+    assert protocol_words("book: drf_calibrated_steep") == "drf_calibrated_steep, book protocol"
+    assert protocol_words("paper") == "paper protocol"

@@ -171,10 +171,11 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
     under one protocol only). Ours, the rules and each claim's evidence (notebook section, tables,
     figures) are claims.md's, which the README links once instead of repeating them."""
     from drfkit.study.claims import CLAIMS, read_claims
+    from drfkit.study.claims.standins import protocol_words, split_label
 
     c = read_claims(claims_csv)
     protocols = list(dict.fromkeys(c["protocol"]))
-    verdict_cols = [f"verdict, {p} protocol" for p in protocols] if len(protocols) > 1 else ["verdict"]
+    verdict_cols = [f"verdict, {protocol_words(p)}" for p in protocols] if len(protocols) > 1 else ["verdict"]
     head = ["id", "claim", "paper"] + verdict_cols
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for cid, rows in c.groupby("id", sort=False):
@@ -186,7 +187,8 @@ def claims_summary_table(claims_csv: Path) -> list[str]:
         lines.append("| " + " | ".join(str(x).replace("|", "/") for x in cells) + " |")
     if len(protocols) > 1:
         lines += ["", "— : the claim is not judged under that protocol (its study's models were not trained "
-                      "under it in this profile)."]
+                      "under it in this profile)" + (", or for that model (it is judged in the paper's DRF's place "
+                      "for the DRF claims only)" if any(split_label(p)[1] for p in protocols) else "") + "."]
     return lines
 
 

@@ -55,6 +55,9 @@ class Study:
     # ('C7a': the gate keeps PICP near always-dropout at much less time; 'C7b': no clear gain over random
     # gating); '' = none, and notebook 06's sweep of the study is judged by no claim
     gating_claim: str = ""
+    # DRF kinds judged by the DRF claims (C1, C2, F1, F2) in their own rows beside the paper's DRF, under each
+    # protocol that trains them (``drfkit.study.claims.standins``)
+    judged_drfs: tuple[str, ...] = ()
     noise_name: str = "noise"      # the noise parameter's name on axes ("p" alone reads as a dropout rate)
     target_name: str = ""          # what the output is, on axes before "MAE" ('' = the unit says it)
     target_unit: str = ""          # its unit, on axes

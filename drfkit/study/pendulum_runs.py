@@ -204,6 +204,8 @@ PENDULUM = Study(
     all_protocols=tuple(PROTOCOLS), data=pendulum_data, data_key=pendulum_data_key,
     model_options=pendulum_model_options, train_config=pendulum_train_config,
     fresh_training=pendulum_fresh_training, gating_claim="C7a", noise_name="max noise",
+    # the fifth round's choice (docs/dynamics.md), judged in its own rows beside the paper's DRF
+    judged_drfs=("drf_calibrated_steep",),
     target_unit="(cos θ, sin θ)")
 
 __all__ = ["FRESH_MOTION_SEED", "PENDULUM", "PROFILE_SCHEDULE", "PendulumSplits", "SPLIT_SEED_OFFSET", "load_split",

@@ -16,6 +16,7 @@ Adding one is one file, here or an extension (``drfkit.util.registry``); ``judge
   ``f1_filter_mechanism``, ``f2_blackout_coasting`` -- the method's premise (the filter filters, the
   state coasts);
 * ``verdicts``   -- the verdicts and what every rule shares (seed intervals, summary cells, curves);
+* ``standins`` -- C1, C2, F1 and F2 judged again for another DRF in the paper's DRF's place (own rows);
 * ``monoloco``, ``efficiency``, ``dynamics_table`` -- what C3/C4, C7a/C7b and F1/F2 share; ``mechanism``
   -- the premise F1 and F2 check, and what a protocol's DRF sees in training;
 * ``table``      -- the ``Claim`` registry (``CLAIMS``), claims.csv (``upsert``) and claims.md;

@@ -7,6 +7,7 @@ from typing import Any
 import pandas as pd
 
 from drfkit.study import paper
+from drfkit.study.claims.standins import tag, variants
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import (NOMINAL_PAIRING, NOT, PARTLY, REPRODUCED, at_levels, cell, fmt,
                                           paired_difference, rows_of)
@@ -56,7 +57,8 @@ def judge(ood) -> Rows:
         by_seed = rows_of(ood.evals, "pendulum", protocol)
         by_seed = by_seed[by_seed["dropout_p"].eq(by_seed.groupby("model")["dropout_p"].transform("first"))]
         mae = at_levels(rows_of(ood.summary, "pendulum", protocol), levels)
-        rows.append((protocol, c1_pendulum_mae_ordering(mae, levels, by_seed=by_seed)))
+        for cell_, kind, (mae_, by_seed_) in variants(protocol, ood.judged_drfs.get("pendulum", ()), mae, by_seed):
+            rows.append((cell_, tag(c1_pendulum_mae_ordering(mae_, levels, by_seed=by_seed_), kind)))
     return rows
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from drfkit.study import paper
+from drfkit.study.claims.standins import tag, variants
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import (CURVE_RULE, SATURATED_PICP, collapsed_curve, collapsed_text, curve_shares,
                                           curve_verdict, not_recalibrated, rows_of, share_text)
@@ -47,8 +48,10 @@ def judge(ood) -> Rows:
     if ood.curves is None:
         return [(protocol, not_recalibrated(c2_pendulum_picp_mpiw(_EMPTY_CURVE)))
                 for protocol, judged in ood.by_protocol() if ("pendulum", protocol) in judged]
-    return [(protocol, c2_pendulum_picp_mpiw(rows_of(ood.curves, "pendulum", protocol), ood.paper_noise["pendulum"]))
-            for protocol, judged in ood.by_protocol() if ("pendulum", protocol) in judged]
+    return [(cell_, tag(c2_pendulum_picp_mpiw(curve, ood.paper_noise["pendulum"]), kind))
+            for protocol, judged in ood.by_protocol() if ("pendulum", protocol) in judged
+            for cell_, kind, (curve,) in variants(protocol, ood.judged_drfs.get("pendulum", ()),
+                                                  rows_of(ood.curves, "pendulum", protocol))]
 
 
 _EMPTY_CURVE = pd.DataFrame(columns=["model", "noise", "mpiw", "picp", "picp_lo", "picp_hi"])

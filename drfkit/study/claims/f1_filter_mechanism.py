@@ -7,6 +7,7 @@ from typing import Any
 import pandas as pd
 
 from drfkit.study.claims.dynamics_table import MECHANISM_EVIDENCE, drf_protocols
+from drfkit.study.claims.standins import tag, variants
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, at_most, correlation_interval, fmt_interval, seed_interval
 
@@ -53,8 +54,9 @@ def f1_filter_mechanism(mechanism: pd.DataFrame, noise: float) -> dict[str, Any]
 
 def judge(tables) -> Rows:
     """F1 per protocol at the profile's highest pendulum noise (``judge.Tables``)."""
-    return [(protocol, f1_filter_mechanism(part, max(tables.P.pendulum.eval_max_noise)))
-            for protocol, part in drf_protocols(tables)]
+    return [(cell_, tag(f1_filter_mechanism(rows, max(tables.P.pendulum.eval_max_noise)), kind))
+            for protocol, part in drf_protocols(tables)
+            for cell_, kind, (rows,) in variants(protocol, tables.judged_drfs("pendulum"), part)]
 
 
 CLAIM = CLAIMS.register("F1", Claim("F1", tables=("pendulum_protocols.csv",), figures=(), judge=judge,

@@ -8,6 +8,7 @@ from typing import Any
 import pandas as pd
 
 from drfkit.study.claims.dynamics_table import MECHANISM_EVIDENCE, UNKNOWN_TRAINING, drf_protocols, training_label
+from drfkit.study.claims.standins import tag, variants
 from drfkit.study.claims.table import CLAIMS, Claim, Rows
 from drfkit.study.claims.verdicts import NOT, PARTLY, REPRODUCED, at_most, fmt_interval, seed_interval
 
@@ -64,8 +65,9 @@ def judge(tables) -> Rows:
         ref = (refs[(refs["protocol"] == protocol) & (refs["noise"].astype(str) == "blackout")]["mae"]
                if refs is not None else pd.Series(dtype=float))
         chance = float(part["mae_blackout_chance"].mean()) if "mae_blackout_chance" in part else math.nan
-        rows.append((protocol, f2_blackout_coasting(part, ref.to_numpy(dtype=float),
-                                                    in_distribution=training_label(part), chance=chance)))
+        for cell_, kind, (own,) in variants(protocol, tables.judged_drfs("pendulum"), part):
+            rows.append((cell_, tag(f2_blackout_coasting(own, ref.to_numpy(dtype=float),
+                                                         in_distribution=training_label(part), chance=chance), kind)))
     return rows
 
 

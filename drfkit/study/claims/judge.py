@@ -42,6 +42,10 @@ class Tables:
             self._cache[name] = _read(self.P, name)
         return self._cache[name]
 
+    def judged_drfs(self, study: str) -> tuple[str, ...]:
+        """The DRF kinds judged in their own rows beside the paper's DRF (``Study.judged_drfs``)."""
+        return registry.study(study).judged_drfs
+
 
 # ------------------------------------------------------------------------------ notebook 04
 def _matched_monoloco(P) -> tuple[pd.DataFrame | None, pd.DataFrame | None, str]:
@@ -81,6 +85,7 @@ class OodTables:
     matched: pd.DataFrame | None
     matched_seeds: pd.DataFrame | None
     matched_note: str
+    judged_drfs: dict[str, tuple[str, ...]] = field(default_factory=dict)  # per study (``Study.judged_drfs``)
 
     def by_protocol(self) -> list[tuple[str, list[tuple[str, str]]]]:
         """Per protocol (the paper's first), the (study, protocol of its models) judged in it: every claim
@@ -120,7 +125,8 @@ def ood_tables(P) -> OodTables | None:
                      paper_noise={s: e.eval_levels(P) for s, e in entry.items()},
                      shifted={s: e.shifted_levels(P) for s, e in entry.items()},
                      baselines={s: e.baselines(P) for s, e in entry.items()}, matched=matched,
-                     matched_seeds=matched_seeds, matched_note=note)
+                     matched_seeds=matched_seeds, matched_note=note,
+                     judged_drfs={s: e.judged_drfs for s, e in entry.items()})
 
 
 # ------------------------------------------------------------------------------ notebook 06

@@ -13,6 +13,7 @@ from typing import Any, Callable
 
 import pandas as pd
 
+from drfkit.study.claims.standins import protocol_words
 from drfkit.study.claims.verdicts import REPRODUCED
 from drfkit.util.io import atomic_write_csv, atomic_write_text
 from drfkit.util.paths import results_dir
@@ -90,7 +91,7 @@ def reading(table: pd.DataFrame, ids) -> str:
     """A short reading of the verdicts of ``ids`` in a claims table, written from its rows: per claim
     and protocol, the verdict and the numbers that decided it, then what the verdicts say together."""
     rows = table[table["id"].isin(list(ids))]
-    lines = [f"{r['id']} ({r['protocol']} protocol) {r['verdict']}: {r['ours']}." for _, r in rows.iterrows()]
+    lines = [f"{r['id']} ({protocol_words(r['protocol'])}) {r['verdict']}: {r['ours']}." for _, r in rows.iterrows()]
     counts = rows["verdict"].value_counts()
     summary = ", ".join(f"{n} {v}" for v, n in counts.items())
     held = rows.loc[rows["verdict"].eq(REPRODUCED), "id"].tolist()
