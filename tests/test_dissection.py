@@ -366,3 +366,35 @@ def test_the_both_halves_rule_needs_a_calibrated_gain_an_accurate_fit_and_then_t
                                 0.010)
     assert longer.index[longer["chosen"]].tolist() == ["b"]        # more than a frame longer wins over accuracy
     assert not screen_both_halves(means.assign(gain_slope=0.2), 0.010)["chosen"].any()
+
+
+def test_the_both_halves_targets_flip_at_their_bounds():
+    """The fifth round's targets on seed means: each flips when the model's number crosses its bound, a bound
+    relative to a comparator follows the comparator's seed mean, and a model without rows is refused."""
+    import pandas as pd
+
+    from drfkit.study.dissection import both_halves_targets
+
+    def protocols(steep):
+        rows = [{"model": "no_dynamics", "seed": s, "mae_0.5": 0.006, "mae_0.75": 0.08, "mae_after_blackout": 0.01,
+                 "mae_blackout": 0.6, "gain_ratio_blackout": math.nan} for s in range(3)]
+        rows += [{"model": "lstm", "seed": s, "mae_0.5": 0.007, "mae_0.75": 0.06} for s in range(3)]
+        rows += [{"model": "steep", "seed": s, **steep} for s in range(3)]
+        return pd.DataFrame(rows)
+    good = {"mae_0.5": 0.0047, "mae_0.75": 0.014, "mae_blackout": 0.10, "gain_ratio_blackout": 0.25,
+            "mae_after_blackout": 0.009}
+    dis_rows = pd.DataFrame([{"model": "steep", "seed": s, "open_loop_horizon": 15} for s in range(3)])
+    table = both_halves_targets(protocols(good), dis_rows, "steep").set_index("target")
+    assert table["met"].all(), table
+    assert table.loc["MAE at 0.75 <= 0.5 x no_dynamics'", "bound"] == pytest.approx(0.04)
+    assert table.loc["MAE after the gap <= 1.5 x no_dynamics' MAE at 0.5", "bound"] == pytest.approx(0.009)
+    flips = {"mae_blackout": (0.1001, "blackout MAE <= 0.10"), "gain_ratio_blackout": (0.2501,
+             "gain on pure noise <= 0.25 of clean"), "mae_after_blackout": (0.0091,
+             "MAE after the gap <= 1.5 x no_dynamics' MAE at 0.5"), "mae_0.5": (0.0061, "MAE at 0.5 <= no_dynamics'")}
+    for column, (value, target) in flips.items():
+        bad = both_halves_targets(protocols({**good, column: value}), dis_rows, "steep").set_index("target")
+        assert not bad.loc[target, "met"] and bad["met"].sum() >= len(bad) - 2, (column, bad)
+    short = both_halves_targets(protocols(good), dis_rows.assign(open_loop_horizon=[15, 15, 14]), "steep")
+    assert not short.set_index("target").loc["open-loop horizon H >= 15 at 0.5", "met"]
+    with pytest.raises(ValueError, match="no rows of 'absent'"):
+        both_halves_targets(protocols(good), dis_rows, "absent")

@@ -8,6 +8,7 @@ Every MAE here is the dropout-off output's. Nothing reads another split: the ora
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -307,6 +308,47 @@ def screen_both_halves(means: pd.DataFrame, reference_mae: float) -> pd.DataFram
     return means
 
 
+# The fifth round's targets for its chosen DRF (docs/dynamics.md, written before the runs): (name, the model's
+# column, the table it lies in, the bound: a number or (a comparator's column, a factor), '<=' or '<')
+BOTH_HALVES_TARGETS = (
+    ("open-loop horizon H >= 15 at 0.5", "open_loop_horizon", "dissection", 15.0, ">="),
+    ("blackout MAE <= 0.10", "mae_blackout", "protocols", 0.10, "<="),
+    ("MAE at 0.75 <= 0.5 x no_dynamics'", "mae_0.75", "protocols", ("no_dynamics", 0.5), "<="),
+    ("MAE at 0.75 below the LSTM's", "mae_0.75", "protocols", ("lstm", 1.0), "<"),
+    ("gain on pure noise <= 0.25 of clean", "gain_ratio_blackout", "protocols", 0.25, "<="),
+    ("MAE at 0.5 <= no_dynamics'", "mae_0.5", "protocols", ("no_dynamics", 1.0), "<="),
+    ("MAE after the gap <= 1.5 x no_dynamics' MAE at 0.5", "mae_after_blackout", "protocols",
+     ("no_dynamics", 1.5, "mae_0.5"), "<="),
+    ("beyond: MAE at 0.5 <= 0.0048", "mae_0.5", "protocols", 0.0048, "<="),
+    ("beyond: MAE at 0.75 <= 0.015", "mae_0.75", "protocols", 0.015, "<="),
+)
+
+
+def both_halves_targets(protocols: pd.DataFrame, dissection: pd.DataFrame, model: str) -> pd.DataFrame:
+    """The fifth round's targets for ``model`` (``BOTH_HALVES_TARGETS``), on seed means of one protocol's rows:
+    ``protocols`` (notebook 02's protocol table: model, seed, mae_0.5, ...) and ``dissection`` (its dissection
+    table: model, seed, open_loop_horizon). One row per target: value, bound, met, and the per-seed values."""
+    tables = {"protocols": protocols, "dissection": dissection}
+    rows = []
+    for name, column, where, bound, op in BOTH_HALVES_TARGETS:
+        own = tables[where].loc[tables[where]["model"] == model].sort_values("seed")[column].astype(float)
+        if own.empty:
+            raise ValueError(f"no rows of {model!r} in the {where} table: it is not a model of this protocol")
+        if isinstance(bound, tuple):
+            other, factor, *col = bound
+            ref = protocols.loc[protocols["model"] == other, col[0] if col else column].astype(float)
+            limit = factor * float(ref.mean()) if len(ref) else math.nan
+        else:
+            limit = float(bound)
+        value = float(own.mean())
+        # compared at 10 significant digits: a mean of equal seeds must not miss its bound by a rounding error
+        v, b = float(f"{value:.10g}"), float(f"{limit:.10g}")
+        met = {"<=": v <= b, "<": v < b, ">=": v >= b}[op]
+        rows.append({"model": model, "target": name, "value": value, "bound": limit, "met": bool(met),
+                     "per_seed": ", ".join(f"{v:.4g}" for v in own)})
+    return pd.DataFrame(rows)
+
+
 def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     """Per (model, set): the calibration ratios and the gain over the set's frames, mean over seeds and
     level bins weighted by frames -- the dissection's table in one screen."""
@@ -318,5 +360,5 @@ def calibration_summary(calibration: pd.DataFrame) -> pd.DataFrame:
     return per.groupby(["model", "set"], sort=False)[["gain", "err2_over_r", "e2_over_p", "r", "p_prior", "q"]].mean()
 
 
-__all__ = ["BOTH_HALVES_H_TIE", "BOTH_HALVES_MAE_RATIO", "FAILED_SEED_SPEARMAN", "open_loop", "screen_both_halves", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters",
+__all__ = ["BOTH_HALVES_TARGETS", "both_halves_targets", "BOTH_HALVES_H_TIE", "BOTH_HALVES_MAE_RATIO", "FAILED_SEED_SPEARMAN", "open_loop", "screen_both_halves", "SCREEN_MAE_TIE", "SCREEN_MIN_SPEARMAN", "calibration_summary", "dissect_filters",
            "restart_check", "screen_choice", "screen_variants"]

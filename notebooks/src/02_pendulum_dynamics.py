@@ -494,6 +494,23 @@ interventions[["protocol", "model", "seed", "mae_ood", "mae_ood_oracle_gain", "m
                "verdict_blackout", "verdict_ood"]].round(4)
 
 # %% [markdown]
+# The fifth round's chosen DRF against its targets (docs/dynamics.md, written before its runs; seed means on the
+# test split, dropout-off), for each DRF the study judges beside the paper's (`Study.judged_drfs`) that this
+# profile's book protocol trains.
+
+# %%
+# NBVAL_IGNORE_OUTPUT
+from drfkit.study import registry
+
+judged = [k for k in registry.study("pendulum").judged_drfs if (protocols["model"] == k).any()]
+book_rows = lambda t: t[t["protocol"] == "book"]  # noqa: E731
+targets = pd.concat([dissection.both_halves_targets(book_rows(protocols), book_rows(interventions), k) for k in judged],
+                    ignore_index=True) if judged else pd.DataFrame()
+if judged:
+    save_table(P.profile, "pendulum_both_halves_targets", targets)
+targets
+
+# %% [markdown]
 # The open loop by horizon (seed means): the clamped filter's error against hold and the model as it runs
 # through the blackout, and the gap's MAE when only its first k frames are clamped. A clamped curve below hold
 # and under 0.10 is a transition that predicts; a partial-clamp curve that falls with k is a model whose own gain
