@@ -296,7 +296,7 @@ def test_the_readmes_orderings_are_the_tables():
     cal = h[h["model"] == "drf_calibrated"]
     beats = cal.groupby("seed").apply(lambda g: int((g["mae_clamped"] < g["mae_hold"]).cumprod().sum()),
                                       include_groups=False)
-    assert beats.between(8, 10).all() and "its transition beats hold for about 9 frames" in text
+    assert beats.between(8, 10).all() and "The calibrated-gain DRF's transition beats hold for about 9 frames" in text
     assert book("drf_calibrated", "gain_ratio_blackout") > 0.25   # it keeps reading pure noise
     predicts = d[d["open_loop_horizon"] == 15]
     assert set(predicts["model"]) == {"known_dynamics"} and len(predicts) == (d["model"] == "known_dynamics").sum()
