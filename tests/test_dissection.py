@@ -398,3 +398,28 @@ def test_the_both_halves_targets_flip_at_their_bounds():
     assert not short.set_index("target").loc["open-loop horizon H >= 15 at 0.5", "met"]
     with pytest.raises(ValueError, match="no rows of 'absent'"):
         both_halves_targets(protocols(good), dis_rows, "absent")
+
+
+def test_the_dissection_encodes_the_noiseless_frames_once_per_model_with_the_same_numbers(monkeypatch):
+    """The three sets show the same motions, so their noiseless frames are encoded once per filter (four encoder
+    passes, not six), and the rows are those of encoding them once per set, byte for byte."""
+    from drfkit.study import dissection, studies
+    from drfkit.study.params import for_notebook, load_profile
+
+    P = for_notebook("02_pendulum_dynamics", load_profile("quick"))
+    torch.manual_seed(0)
+    models = {(kind, 0): build_model(studies.model_config("pendulum", kind, P)).eval()
+              for kind in ("no_dynamics", "drf_calibrated")}
+    encoded = []
+    real = dis.observations
+    monkeypatch.setattr(dis, "observations", lambda model, images, **kw: encoded.append(images.shape) or real(model, images, **kw))
+    once = [t.to_csv(index=False) for t in dissection.dissect_filters(P, models)]
+    assert len(encoded) == 4
+
+    def once_per_set(model, arrays, codes):
+        w, r = real(model, torch.from_numpy(arrays["images"]))
+        w_clean, _ = real(model, torch.from_numpy(arrays["clean"]))
+        return w, r, model.observed_truth(w_clean, torch.from_numpy(arrays["targets"]))
+
+    monkeypatch.setattr(dissection, "_prepared", once_per_set)
+    assert [t.to_csv(index=False) for t in dissection.dissect_filters(P, models)] == once

@@ -402,3 +402,26 @@ def test_the_quantisation_effect_scores_each_storage_with_each_likelihood_and_ev
     learned = table[table["estimator"] == "no_dynamics"]
     assert sorted(learned["frames"]) == ["round", "truncate"] and learned["likelihood"].isna().all()
     assert learned["mae"].nunique() == 2        # the frames differ, so does the output
+
+
+def test_the_limit_on_pixels_keys_alike_in_notebooks_02_and_04():
+    """Both notebooks call the cached limit on pixels; with the profile narrowed to what it reads, the second call's
+    key is the first one's (a key of each notebook's whole parameter set missed it and computed it again), and a
+    narrowed profile refuses a read of anything else rather than key a result on too little."""
+    from drfkit.book.measurements import key
+    from drfkit.study import dynamics
+    from drfkit.study.params import for_notebook, load_profile
+    from drfkit.study.schema import ParameterError
+
+    keys, whole = set(), set()
+    for notebook in ("02_pendulum_dynamics", "04_ood_noise_evaluation"):
+        P = for_notebook(notebook, load_profile("paper"))
+        keys.add(key(dynamics.pixel_limit, (dynamics.limit_profile(P), [0.5]), {}, with_machine=False))
+        whole.add(key(dynamics.pixel_limit, (P, [0.5]), {}, with_machine=False))
+    assert len(keys) == 1 and len(whole) == 2
+    narrowed = dynamics.limit_profile(for_notebook("02_pendulum_dynamics", load_profile("paper")))
+    assert narrowed.pendulum.test_seed == load_profile("paper")["pend_test_seed"]
+    with pytest.raises(ParameterError, match="the limit on pixels.*pend_models"):
+        narrowed.pendulum.models
+    with pytest.raises(ParameterError, match="does not declare"):
+        dynamics.limit_profile(for_notebook("03_nuscenes_training", load_profile("paper")))

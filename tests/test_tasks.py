@@ -43,7 +43,8 @@ def test_the_evaluation_tables_are_byte_for_byte_the_same_at_one_and_two_workers
     """Two random-weight models of the quick profile: the tables of two worker processes (each task on whichever
     worker is free) equal those made in this process, byte for byte, each run from an empty results folder (no
     cached prediction shared between them): the evaluation at two test levels, the mechanism checks and the
-    blackout curves, the validation sigma scales, the calibration table and the dissection."""
+    blackout curves, the validation sigma scales, the calibration table, the dissection, the limit on pixels,
+    rounding or truncation and the true-physics reference."""
     from drfkit.data.pendulum import blackout_frames
     from drfkit.models import build_model
     from drfkit.study import dynamics, studies
@@ -66,12 +67,17 @@ def test_the_evaluation_tables_are_byte_for_byte_the_same_at_one_and_two_workers
                     dynamics.mechanism_table(P, models, 0.75), dynamics.blackout_curves(P, models),
                     pd.DataFrame({"scale": scales}),
                     calibration_table(P, "pendulum", [0.5, 0.75], models, scales, sequences=sequences),
-                    *dissect_filters(P, models)]
+                    *dissect_filters(P, models),
+                    *dynamics.pixel_limit(dynamics.limit_profile(P), [0.5], n_sequences=2, particle_counts=(50, 100)),
+                    dynamics.quantisation_effect(P, models, [0.5, 0.75], n_sequences=2, n_particles=50),
+                    *dynamics.physics_reference(P, {0: models[("no_dynamics", 0)]}, [0.5], n_particles=50)]
         finally:
             tasks.close_workers()
         tables[workers] = [table.to_csv(index=False) for table in made]
     assert tables["2"] == tables["1"]
-    evals, mechanism, curves, scales, calibration, _, interventions, horizons, _ = tables["1"]
+    evals, mechanism, curves, scales, calibration, _, interventions, horizons, _, limit, conv, quant, ref, _ = tables["1"]
+    assert limit.count("\n") == 1 + 3 * 4 and conv.count("\n") == 1 + 3 * 2   # clean, 0.5, blackout
+    assert quant.count("\n") == 1 + 2 * 2 * (2 * 2 + 2) and ref.count("\n") == 1 + 2   # 0.5 and the blackout
     assert evals.count("\n") == 1 + 4 and mechanism.count("\n") == 1 + 2 and "gain_ratio_blackout" in mechanism
     assert scales.count("\n") == 1 + 2 and calibration.count("\n") == 1 + 2 * 2 * 2  # (model, level) x intervals
     start, stop = blackout_frames(P.pendulum.seq_len)

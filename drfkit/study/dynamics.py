@@ -26,6 +26,7 @@ import torch
 from drfkit.methods import references
 from drfkit.methods.references import like_for_like_mae, reference_on
 from drfkit.study import studies
+from drfkit.study.profile import narrowed
 from drfkit.core.metrics import bootstrap_interval
 from drfkit.data.noise import Noise
 from drfkit.data.pendulum import BLACKOUT_SEED_OFFSET, blackout_frames, with_blackout
@@ -33,7 +34,6 @@ from drfkit.methods.diagnostics import (abs_error_per_frame, blackout_summary, f
                                        recovery_summary)
 from drfkit.util.paths import predictions_dir
 from drfkit.methods.predictions import point_and_sigma
-from drfkit.util.progress import steps
 from drfkit.util.tasks import forget, map_tasks, memo
 from drfkit.models.portable import portable
 
@@ -114,6 +114,19 @@ def blackout_table(curves: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _reference_sets(P, levels: list[float]) -> tuple[dict[str, np.ndarray], dict[Any, dict[str, np.ndarray]]]:
+    """(val at the training noise, {level: test, 'blackout': the blackout test set}) of ``physics_reference``."""
+    val = memo((P, "pendulum split", "val", None), lambda: studies.pendulum_split(P, "val"))
+    return val, {**{level: _split(P, "test", level) for level in levels}, "blackout": _dark(P, "test")}
+
+
+def _reference_task(P, levels: list[float], n_particles: int, seed: int, shared: dict
+                    ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    model = shared[seed].model
+    val, sets = _reference_sets(P, levels)
+    return reference_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles, seed)
+
+
 def physics_reference(P, no_dynamics: dict[int, Any], levels, n_particles: int = 1000
                       ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The true-physics particle filter on each no_dynamics seed's per-frame estimates.
@@ -122,15 +135,13 @@ def physics_reference(P, no_dynamics: dict[int, Any], levels, n_particles: int =
     (the reference), the calibrated 'sigma_scale' and 'outlier'; noise = 'blackout' for the blackout
     test set. curves: the reference's MAE per frame on the blackout set (model = 'physics_reference').
     """
-    val = studies.pendulum_split(P, "val")
-    sets = {float(level): studies.pendulum_split(P, "test", level) for level in levels}
-    sets["blackout"] = blackout_split(P, "test")
-    rows, curve_rows = [], []
-    for seed, model in steps(no_dynamics.items(), "true-physics reference (per no_dynamics seed)", len(no_dynamics)):
-        table, curves = reference_on(lambda arrays: _point_and_sigma(P, model, arrays, seed), val, sets, n_particles,
-                                     seed)
-        rows.append(table.assign(seed=seed))
-        curve_rows.append(curves.assign(seed=seed))
+    levels = [float(level) for level in levels]
+    forget()
+    _reference_sets(P, levels)  # read (made, the first time) here once: workers only read them
+    parts = map_tasks(_reference_task, [(P, levels, n_particles, seed) for seed in no_dynamics],
+                      shared=portable(no_dynamics), desc="true-physics reference (per no_dynamics seed)")
+    rows = [table.assign(seed=seed) for seed, (table, _) in zip(no_dynamics, parts)]
+    curve_rows = [curves.assign(seed=seed) for seed, (_, curves) in zip(no_dynamics, parts)]
     order = ["seed", "noise", "mae_input", "mae", "sigma_scale", "outlier", "calibration_interior", "n_particles"]
     return (pd.concat(rows, ignore_index=True)[order],
             pd.concat(curve_rows, ignore_index=True)[["model", "seed", "frame", "mae"]])
@@ -204,6 +215,17 @@ def protocol_table(protocol: str, evals: pd.DataFrame, mechanism: pd.DataFrame, 
 
 
 
+#: the parameters ``pixel_limit`` reads: the pendulum splits (``studies.profile_splits``)
+LIMIT_PARAMETERS = ("profile", "pend_train_sequences", "pend_val_sequences", "pend_test_sequences", "pend_seq_len",
+                    "pend_train_max_noise", "pend_data_seed", "pend_test_seed")
+
+
+def limit_profile(P):
+    """``P`` narrowed to ``LIMIT_PARAMETERS``: notebooks 02 and 04 call the cached ``pixel_limit`` with it, so the
+    second call reads the first one's entry (a key of each notebook's whole parameter set would miss it)."""
+    return narrowed(P, LIMIT_PARAMETERS, "the limit on pixels (drfkit.study.dynamics.pixel_limit)")
+
+
 def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 2000, 4000),
                 seed: int = 0) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The limit on pixels (``drfkit.methods.pixel_bayes``) on the first ``n_sequences`` test sequences,
@@ -215,39 +237,54 @@ def pixel_limit(P, levels, n_sequences: int = 40, particle_counts=(500, 1000, 20
     Returns (table, convergence): table rows per (noise, estimator): mae (``like_for_like_mae``: the
     blackout set's over its blackout frames), mae_lo, mae_hi (95 % percentile bootstrap over sequences),
     n_sequences, n_particles; convergence rows per (noise,
-    n_particles): the marginalised filter's mae at each particle count."""
+    n_particles): the marginalised filter's mae at each particle count. One task per test set
+    (``drfkit.util.tasks.map_tasks``), gathered in the sets' order."""
+    names = ["clean", *(float(level) for level in levels), "blackout"]
+    forget()
+    for name in names:  # read (made, the first time) here once: workers only read them
+        _limit_set(P, name)
+    parts = map_tasks(_limit_task, [(P, name, n_sequences, tuple(particle_counts), seed) for name in names],
+                      desc="the limit on pixels (one task per test set)")
+    return (pd.DataFrame([row for rows, _ in parts for row in rows]),
+            pd.DataFrame([row for _, conv in parts for row in conv]))
+
+
+def _limit_set(P, name: str | float) -> dict[str, np.ndarray]:
+    return _dark(P, "test") if name == "blackout" else _split(P, "test", 0.0 if name == "clean" else float(name))
+
+
+def _limit_task(P, name: str | float, n_sequences: int, particle_counts: tuple[int, ...], seed: int,
+                shared=None) -> tuple[list[dict], list[dict]]:
+    """``pixel_limit``'s rows and convergence rows of one test set (a task: the sets are independent)."""
     from drfkit.methods import pixel_bayes
 
-    sets = {"clean": studies.pendulum_split(P, "test", 0.0)}
-    sets |= {float(level): studies.pendulum_split(P, "test", level) for level in levels}
-    sets["blackout"] = blackout_split(P, "test")
+    arrays = _limit_set(P, name)
+    name = name if isinstance(name, str) else f"{name:g}"
     most = max(particle_counts)
     rows, conv = [], []
-    for name, arrays in steps(sets.items(), "the limit on pixels", len(sets)):
-        name = name if isinstance(name, str) else f"{name:g}"
-        images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
-        loglik = pixel_bayes.sequence_log_likelihoods(images)
-        known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
-        theta = references.template_angles(images)
-        by_count = {count: pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
-                    for count in particle_counts}
-        estimates = {
-            "pixel_pf": by_count[most],
-            "pixel_pf_known_level": pixel_bayes.pixel_particle_filter(known, n_particles=most, seed=seed),
-            "per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
-            "template_matching": np.stack([np.cos(theta), np.sin(theta)], axis=-1)}
-        for estimator, est in estimates.items():
-            per_sequence = [like_for_like_mae(abs_error_per_frame(est[i:i + 1], targets[i:i + 1]), name)
-                            for i in range(images.shape[0])]
-            lo, hi = bootstrap_interval(per_sequence, seed=seed)
-            rows.append({"noise": name, "estimator": estimator,
-                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name), "mae_lo": lo, "mae_hi": hi,
-                         "n_sequences": int(images.shape[0]),
-                         "n_particles": most if estimator.startswith("pixel_pf") else 0})
-        for count, est in by_count.items():
-            conv.append({"noise": name, "n_particles": count,
-                         "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
-    return pd.DataFrame(rows), pd.DataFrame(conv)
+    images, targets = arrays["images"][:n_sequences], arrays["targets"][:n_sequences]
+    loglik = pixel_bayes.sequence_log_likelihoods(images)
+    known = pixel_bayes.sequence_log_likelihoods(images, arrays["noise"][:n_sequences])
+    theta = references.template_angles(images)
+    by_count = {count: pixel_bayes.pixel_particle_filter(loglik, n_particles=count, seed=seed)
+                for count in particle_counts}
+    estimates = {
+        "pixel_pf": by_count[most],
+        "pixel_pf_known_level": pixel_bayes.pixel_particle_filter(known, n_particles=most, seed=seed),
+        "per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
+        "template_matching": np.stack([np.cos(theta), np.sin(theta)], axis=-1)}
+    for estimator, est in estimates.items():
+        per_sequence = [like_for_like_mae(abs_error_per_frame(est[i:i + 1], targets[i:i + 1]), name)
+                        for i in range(images.shape[0])]
+        lo, hi = bootstrap_interval(per_sequence, seed=seed)
+        rows.append({"noise": name, "estimator": estimator,
+                     "mae": like_for_like_mae(abs_error_per_frame(est, targets), name), "mae_lo": lo, "mae_hi": hi,
+                     "n_sequences": int(images.shape[0]),
+                     "n_particles": most if estimator.startswith("pixel_pf") else 0})
+    for count, est in by_count.items():
+        conv.append({"noise": name, "n_particles": count,
+                     "mae": like_for_like_mae(abs_error_per_frame(est, targets), name)})
+    return rows, conv
 
 
 def quantisation_effect(P, models: dict[tuple[str, int], Any], levels, n_sequences: int = 100,
@@ -260,26 +297,41 @@ def quantisation_effect(P, models: dict[tuple[str, int], Any], levels, n_sequenc
     filter ('per_frame_bayes', 'pixel_pf') with the likelihood of either storage on either frames (the mismatched
     pair shows what the wrong model of the benchmark's pixels costs); every (kind, seed) of ``models`` by its
     dropout-off pass on both ('likelihood' NaN; trained on rounded frames, so 'truncate' is a shift it never saw)."""
+    levels = [float(v) for v in levels]
+    forget()
+    for level in levels:  # read (made, the first time) here once: workers only read them
+        _stored_both_ways(P, level)
+    parts = map_tasks(_quantisation_task, [(P, level, n_sequences, n_particles, seed) for level in levels],
+                      shared=portable(models), desc="rounding or truncation (one task per level)")
+    return pd.DataFrame([row for rows in parts for row in rows])
+
+
+def _stored_both_ways(P, level: float) -> dict[str, dict[str, np.ndarray]]:
+    return {q: memo((P, "pendulum split", "test", kind, level),
+                    lambda kind=kind: studies.pendulum_split(P, "test", Noise(kind, level)))
+            for q, kind in (("round", "rkn_uniform"), ("truncate", "rkn_uniform_truncated"))}
+
+
+def _quantisation_task(P, level: float, n_sequences: int, n_particles: int, seed: int, shared: dict) -> list[dict]:
+    """``quantisation_effect``'s rows at one level (a task: the levels are independent)."""
     from drfkit.methods import pixel_bayes
 
     rows = []
-    for level in steps([float(v) for v in levels], "rounding or truncation", len(levels)):
-        frames = {q: studies.pendulum_split(P, "test", Noise(kind, level))
-                  for q, kind in (("round", "rkn_uniform"), ("truncate", "rkn_uniform_truncated"))}
-        targets = frames["round"]["targets"][:n_sequences]
-        for stored, arrays in frames.items():
-            images = arrays["images"][:n_sequences]
-            for likelihood in ("round", "truncate"):
-                loglik = pixel_bayes.sequence_log_likelihoods(images, quantise=likelihood)
-                estimates = {"per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
-                             "pixel_pf": pixel_bayes.pixel_particle_filter(loglik, n_particles=n_particles, seed=seed)}
-                rows += [{"noise": level, "estimator": name, "seed": np.nan, "frames": stored, "likelihood": likelihood,
-                          "mae": float(abs_error_per_frame(est, targets).mean())} for name, est in estimates.items()]
-            for (kind, model_seed), model in models.items():
-                point = dropout_off_point(model, images)
-                rows.append({"noise": level, "estimator": kind, "seed": model_seed, "frames": stored,
-                             "likelihood": np.nan, "mae": float(abs_error_per_frame(point, targets).mean())})
-    return pd.DataFrame(rows)
+    frames = _stored_both_ways(P, level)
+    targets = frames["round"]["targets"][:n_sequences]
+    for stored, arrays in frames.items():
+        images = arrays["images"][:n_sequences]
+        for likelihood in ("round", "truncate"):
+            loglik = pixel_bayes.sequence_log_likelihoods(images, quantise=likelihood)
+            estimates = {"per_frame_bayes": pixel_bayes.per_frame_bayes(images, loglik=loglik.reshape(-1, loglik.shape[-1])),
+                         "pixel_pf": pixel_bayes.pixel_particle_filter(loglik, n_particles=n_particles, seed=seed)}
+            rows += [{"noise": level, "estimator": name, "seed": np.nan, "frames": stored, "likelihood": likelihood,
+                      "mae": float(abs_error_per_frame(est, targets).mean())} for name, est in estimates.items()]
+        for (kind, model_seed), entry in shared.items():
+            point = dropout_off_point(entry.model, images)
+            rows.append({"noise": level, "estimator": kind, "seed": model_seed, "frames": stored,
+                         "likelihood": np.nan, "mae": float(abs_error_per_frame(point, targets).mean())})
+    return rows
 
 
 def dropout_off_point(model, images: np.ndarray, chunk: int = 256) -> np.ndarray:

@@ -120,4 +120,18 @@ def build_profile(flat: dict[str, Any], where: str) -> Any:
     return make(())
 
 
-__all__ = ["ABSENT", "Profile", "ProfileSection", "SECTION_CLASSES", "build_profile"]
+def narrowed(P, names, where: str) -> Any:
+    """``P`` with only the declared parameters ``names`` (flat notebook names), its other ones absent.
+
+    A cached study (``drfkit.book.measurements``) keys a profile by its declared parameters, so two notebooks
+    that declare different sets miss each other's entry for the same computation; called with the profile
+    narrowed to what it reads, the study keys alike in both. A read of anything else raises (it names
+    ``where``), so a narrowing too tight fails loudly rather than reusing a stale result."""
+    declared = P.declared()
+    missing = sorted(set(names) - set(declared))
+    if missing:
+        raise ParameterError(f"{where}: the profile does not declare {missing}, which this computation reads")
+    return build_profile({name: declared[name] for name in names}, where)
+
+
+__all__ = ["ABSENT", "Profile", "ProfileSection", "SECTION_CLASSES", "build_profile", "narrowed"]

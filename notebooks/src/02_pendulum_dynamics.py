@@ -121,7 +121,8 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-limit, limit_convergence = cached(P.profile, dynamics.pixel_limit, P, sorted({*P.pendulum.eval_max_noise, 1.0}),
+limit, limit_convergence = cached(P.profile, dynamics.pixel_limit, dynamics.limit_profile(P),
+                                  sorted({*P.pendulum.eval_max_noise, 1.0}),
                                   n_sequences=P.dynamics.limit.sequences,
                                   particle_counts=tuple(P.dynamics.limit.particles), seed=P.seeds[0], timing=False)
 save_table(P.profile, "pendulum_pixel_limit", limit)

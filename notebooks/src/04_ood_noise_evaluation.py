@@ -155,7 +155,8 @@ print(f"calibration table: {len(calibration)} rows; median validation scale "
 from drfkit.book.measurements import cached
 from drfkit.study import dynamics
 
-limit, _ = cached(P.profile, dynamics.pixel_limit, P, sorted({*P.pendulum.eval_max_noise, 1.0}),
+limit, _ = cached(P.profile, dynamics.pixel_limit, dynamics.limit_profile(P),
+                  sorted({*P.pendulum.eval_max_noise, 1.0}),
                   n_sequences=P.dynamics.limit.sequences, particle_counts=tuple(P.dynamics.limit.particles),
                   seed=P.seeds[0], timing=False)   # notebook 02's call: read from its cache
 NON_LEARNED = {"pixel_pf": "the limit: particle filter on pixels", "per_frame_bayes": "per-frame Bayes on pixels",

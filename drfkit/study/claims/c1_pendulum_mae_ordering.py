@@ -57,7 +57,7 @@ def judge(ood) -> Rows:
         by_seed = rows_of(ood.evals, "pendulum", protocol)
         by_seed = by_seed[by_seed["dropout_p"].eq(by_seed.groupby("model")["dropout_p"].transform("first"))]
         mae = at_levels(rows_of(ood.summary, "pendulum", protocol), levels)
-        for cell_, kind, (mae_, by_seed_) in variants(protocol, ood.judged_drfs.get("pendulum", ()), mae, by_seed):
+        for cell_, kind, (mae_, by_seed_) in variants(protocol, ood.judged_drfs("pendulum"), mae, by_seed):
             rows.append((cell_, tag(c1_pendulum_mae_ordering(mae_, levels, by_seed=by_seed_), kind)))
     return rows
 

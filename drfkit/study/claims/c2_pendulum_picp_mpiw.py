@@ -50,7 +50,7 @@ def judge(ood) -> Rows:
                 for protocol, judged in ood.by_protocol() if ("pendulum", protocol) in judged]
     return [(cell_, tag(c2_pendulum_picp_mpiw(curve, ood.paper_noise["pendulum"]), kind))
             for protocol, judged in ood.by_protocol() if ("pendulum", protocol) in judged
-            for cell_, kind, (curve,) in variants(protocol, ood.judged_drfs.get("pendulum", ()),
+            for cell_, kind, (curve,) in variants(protocol, ood.judged_drfs("pendulum"),
                                                   rows_of(ood.curves, "pendulum", protocol))]
 
 

@@ -28,8 +28,16 @@ def _read(P, name: str) -> pd.DataFrame | None:
     return pd.read_csv(path) if path.exists() else None
 
 
+class _JudgedDrfs:
+    """What every claim's tables share: the DRF kinds judged in their own rows, asked of the registry."""
+
+    def judged_drfs(self, study: str) -> tuple[str, ...]:
+        """The DRF kinds judged in their own rows beside the paper's DRF (``Study.judged_drfs``)."""
+        return registry.study(study).judged_drfs
+
+
 @dataclass
-class Tables:
+class Tables(_JudgedDrfs):
     """A profile's tables (results/<profile>/tables/<name>.csv), each read once when first asked for;
     ``P``: the parameters of the notebook that wrote them."""
 
@@ -41,10 +49,6 @@ class Tables:
         if name not in self._cache:
             self._cache[name] = _read(self.P, name)
         return self._cache[name]
-
-    def judged_drfs(self, study: str) -> tuple[str, ...]:
-        """The DRF kinds judged in their own rows beside the paper's DRF (``Study.judged_drfs``)."""
-        return registry.study(study).judged_drfs
 
 
 # ------------------------------------------------------------------------------ notebook 04
@@ -67,7 +71,7 @@ def _matched_monoloco(P) -> tuple[pd.DataFrame | None, pd.DataFrame | None, str]
 
 
 @dataclass
-class OodTables:
+class OodTables(_JudgedDrfs):
     """What C1-C5 read (notebook 04): the summary, per-seed rows and PICP–MPIW curves (intervals recalibrated on
     validation, ``drfkit.study.evaluate.uncertainty_scales``) of every study in
     the profile's evaluation, each study's protocols, paper levels, shifted levels and baselines, and
@@ -85,7 +89,6 @@ class OodTables:
     matched: pd.DataFrame | None
     matched_seeds: pd.DataFrame | None
     matched_note: str
-    judged_drfs: dict[str, tuple[str, ...]] = field(default_factory=dict)  # per study (``Study.judged_drfs``)
 
     def by_protocol(self) -> list[tuple[str, list[tuple[str, str]]]]:
         """Per protocol (the paper's first), the (study, protocol of its models) judged in it: every claim
@@ -125,8 +128,7 @@ def ood_tables(P) -> OodTables | None:
                      paper_noise={s: e.eval_levels(P) for s, e in entry.items()},
                      shifted={s: e.shifted_levels(P) for s, e in entry.items()},
                      baselines={s: e.baselines(P) for s, e in entry.items()}, matched=matched,
-                     matched_seeds=matched_seeds, matched_note=note,
-                     judged_drfs={s: e.judged_drfs for s, e in entry.items()})
+                     matched_seeds=matched_seeds, matched_note=note)
 
 
 # ------------------------------------------------------------------------------ notebook 06
