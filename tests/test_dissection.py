@@ -423,3 +423,13 @@ def test_the_dissection_encodes_the_noiseless_frames_once_per_model_with_the_sam
 
     monkeypatch.setattr(dissection, "_prepared", once_per_set)
     assert [t.to_csv(index=False) for t in dissection.dissect_filters(P, models)] == once
+
+
+def test_the_encoder_pass_tool_counts_four_passes_against_six_with_the_same_rows(load_tool, capsys):
+    """tools/dissection_encodes.py (docs/rerun_time.md's measurement) on a random model of the quick profile: the
+    dissection encodes the noiseless frames once per model (4 passes) or once per set (6), with the same rows."""
+    assert load_tool("dissection_encodes").main(["--profile", "quick", "--untrained", "--kind", "drf_calibrated",
+                                                "--sequences", "3", "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| once per model | 4 |" in out and "| once per set | 6 |" in out
+    assert "rows byte for byte the same: True" in out

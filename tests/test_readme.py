@@ -55,3 +55,17 @@ def test_readme_is_a_user_s_document_of_at_most_15_kb():
     size = len((REPO_ROOT / "README.md").read_bytes())
     assert size <= 15_000, (f"README.md is {size} bytes: move reference material to docs/ or to the "
                             f"notebook that measures it")
+
+
+def test_the_readme_states_the_committed_cold_runs_time_and_machine():
+    """The README's cold time of `make reproduce` is the committed paper run's total (its manifest), in minutes,
+    on the machine that run records: a rerun that changes the time fails here until the README follows."""
+    import json
+
+    manifest = json.loads((REPO_ROOT / "results" / "paper" / "manifest.json").read_text())
+    minutes = round(manifest["pipeline"]["total_s"] / 60)
+    cpu = manifest["environment"]["cpu"].split()
+    stated = re.search(r"on the committed checkpoints (\d+) min cold \(([^)]+)\)", (REPO_ROOT / "README.md").read_text())
+    assert stated, "README: the reproduce row names its cold time as 'on the committed checkpoints N min cold (CPU)'"
+    assert int(stated.group(1)) == minutes
+    assert stated.group(2) == " ".join(cpu[:2])
