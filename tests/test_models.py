@@ -529,3 +529,37 @@ def test_fast_pooling_is_max_pool2d_bit_for_bit_and_training_keeps_max_pool2d():
         fast = enc(frames)
     slow = enc(frames)  # autograd on: max_pool2d itself
     assert slow.requires_grad and torch.equal(fast, slow.detach())
+
+
+def test_distinct_frames_once_encodes_each_repeated_frame_once_with_the_same_numbers(monkeypatch):
+    """Inside ``distinct_frames_once`` (evaluation) an image model's encoder sees each distinct frame once, and the
+    features (encoder, filter) are bit for bit those of every frame encoded; outside it, with autograd, and after
+    the block, every frame is encoded (training and the timed inference are untouched)."""
+    from drfkit.models import default_config
+    from drfkit.models.parts import ImageEncoder, distinct_frames_once
+
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2)).eval()
+    g = torch.Generator().manual_seed(1)
+    bank = torch.randint(0, 256, (5, 24, 24), generator=g, dtype=torch.uint8)  # a rod bank's clean images
+    x = torch.randint(0, 256, (6, 40, 24, 24), generator=g, dtype=torch.uint8)  # noisy frames: all distinct
+    x[:, ::3] = bank[torch.randint(0, 5, (6, 14), generator=g)]  # a third of the frames from the bank
+    x[2, 20:30] = 0  # a blackout
+    seen = []
+    real = ImageEncoder.encode_frames
+    monkeypatch.setattr(ImageEncoder, "encode_frames", lambda self, f: seen.append(f.shape[0]) or real(self, f))
+    with torch.no_grad():
+        every, every_gains = model.features(x, return_gains=True)
+        n_every = sum(seen)
+        seen.clear()
+        with distinct_frames_once(model):
+            once, once_gains = model.features(x, return_gains=True)
+        n_once = sum(seen)
+    distinct = torch.unique(x.flatten(2).flatten(0, 1), dim=0).shape[0]
+    assert n_every == 6 * 40 and n_once == distinct < 6 * 40 - 6 * 14 + 5
+    assert torch.equal(every, once) and torch.equal(every_gains, once_gains)
+    assert model.encoder.distinct_frames is False  # restored
+    seen.clear()
+    with distinct_frames_once(model):
+        model.features(x)  # autograd on (training): every frame, max_pool2d's gradient rule kept
+    assert sum(seen) == 6 * 40

@@ -120,3 +120,68 @@ def test_the_prediction_key_follows_the_code_that_computes_it(tmp_path, monkeypa
     model_src.write_text("a = 2\n")
     predictions._code_sha256.cache_clear()
     assert predictions.prediction_code_sha256() != first
+
+
+def model_of(kind: str):
+    """A small model of ``kind`` on the input it takes (keypoints where it can, else 24 x 24 images)."""
+    from drfkit.models import MODEL_CLASSES, build_model, default_config
+
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    try:
+        model = build_model(default_config(kind, "keypoints", 1)).eval()
+        x = torch.randn(5, 4, 17, 3, generator=g)
+        x[..., 2] = torch.rand(5, 4, 17, generator=g)
+    except ValueError:
+        model = build_model(default_config(kind, "pendulum", 2)).eval()
+        x = torch.randint(0, 256, (5, 4, 24, 24), generator=g, dtype=torch.uint8)
+    assert kind in MODEL_CLASSES
+    return model, x
+
+
+@pytest.mark.parametrize("kind", list(__import__("drfkit.models", fromlist=["MODEL_CLASSES"]).MODEL_CLASSES))
+def test_a_later_rate_runs_only_the_heads_on_the_stored_features_with_the_same_numbers(tmp_path, monkeypatch, kind):
+    """The features (encoder, then filter or LSTM) are stored by the first prediction of a model on some inputs; a
+    later call at another rate reads them and never runs ``model.features``, and gives what a fresh prediction gives,
+    bit for bit: the features draw no random numbers, so the masks' draws start where they would."""
+    model, x = model_of(kind)
+    args = dict(cache=tmp_path, n_samples=6, seed=7, batch_size=2)
+    predictions.cached_predict_rates(model, x, dropout_rates=[0.3], **args)
+    assert len(list((tmp_path / "features").glob("*.pt"))) == 1
+    torch.manual_seed(7)
+    fresh = predict_rates(model, x, n_samples=6, dropout_rates=[0.1], batch_size=2)[0]
+    monkeypatch.setattr(type(model), "features", lambda *a, **k: pytest.fail("the stored features must be read"))
+    later = predictions.cached_predict_rates(model, x, dropout_rates=[0.1], **args)[0]
+    assert all(torch.equal(a, b) for a, b in zip(fields(fresh) + (fresh.point,), fields(later) + (later.point,)))
+
+
+def test_the_features_store_misses_on_other_inputs_or_chunks_and_recomputes_a_damaged_entry(tmp_path):
+    model, data = small_case()
+    first = predictions.cached_features(model, data.inputs, cache=tmp_path, batch_size=2)
+    predictions.cached_features(model, data.inputs, cache=tmp_path, batch_size=3)
+    predictions.cached_features(model, data.inputs[:3], cache=tmp_path, batch_size=2)
+    assert len(list((tmp_path / "features").glob("*.pt"))) == 3
+    path = tmp_path / "features" / f"{predictions.features_key(model, data.inputs, 2, None)}.pt"
+    path.write_bytes(b"truncated")
+    again = predictions.cached_features(model, data.inputs, cache=tmp_path, batch_size=2)
+    assert torch.equal(first, again) and path.stat().st_size > 100
+
+
+def test_features_that_are_not_these_inputs_are_refused():
+    model, data = small_case()
+    h = predictions.model_features(model, data.inputs, batch_size=2)
+    with pytest.raises(ValueError, match="model_features of these inputs"):
+        predict_rates(model, data.inputs[:3], n_samples=2, features=h)
+    with pytest.raises(ValueError, match="cannot give gains"):
+        predict_rates(model, data.inputs, n_samples=2, features=h, return_gains=True)
+
+
+def test_the_features_store_tool_checks_both_savings_bit_for_bit(load_tool, capsys):
+    """tools/features_store.py (docs/rerun_time.md's measurement) on random models of the quick profile: every
+    book-protocol pendulum kind gets a row, and each saving gives the same numbers bit for bit."""
+    assert load_tool("features_store").main(["--profile", "quick", "--untrained", "--sequences", "3",
+                                             "--rounds", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("| ") and not line.startswith("| model")]
+    assert len(rows) >= 5 and all(line.endswith("| True |") for line in rows)
+    assert "distinct frames of" in out

@@ -45,6 +45,8 @@ import math
 import numpy as np
 import torch
 
+from drfkit.models.parts import distinct_frames_once
+
 LEVEL_BIN = 0.05        # width of the noise-level bins of the calibration table and of the oracle gain
 GAIN_TOLERANCE = 1e-6   # (a1) a clamped frame whose gain reads back above this is an error, not a measurement
 HORIZON = 15            # (a2) open-loop horizons h = 1..HORIZON (the blackout's length)
@@ -52,11 +54,12 @@ OPEN_LOOP_MAX = 0.10    # (a2) the transition predicts at horizon h: output MAE 
 
 
 def observations(model, images: torch.Tensor, batch_size: int = 200) -> tuple[torch.Tensor, torch.Tensor]:
-    """w, r (N, T, n) of ``model.observe`` on images (N, T, ...), in eval mode, without gradients."""
+    """w, r (N, T, n) of ``model.observe`` on images (N, T, ...), in eval mode, without gradients, each distinct
+    frame encoded once (``distinct_frames_once``)."""
     was_training = model.training
     model.eval()
     try:
-        with torch.no_grad():
+        with torch.no_grad(), distinct_frames_once(model):
             parts = [model.observe(images[i:i + batch_size]) for i in range(0, images.shape[0], batch_size)]
         return torch.cat([w for w, _ in parts]), torch.cat([r for _, r in parts])
     finally:

@@ -21,7 +21,7 @@ from drfkit.methods.gating import (ALWAYS, NEVER, RANDOM_SEED_OFFSET, SETTINGS, 
                                    select_frames, uncertainty_stage)
 from drfkit.methods.timing.clock import measure_interleaved, timing_subset, torch_threads
 from drfkit.methods.uncertainty import as_model_input
-from drfkit.models.parts import check_dropout_p, check_n_samples
+from drfkit.models.parts import check_dropout_p, check_n_samples, distinct_frames_once
 
 
 def _metrics(pred: GatedPrediction, y: torch.Tensor, real: torch.Tensor, level: float,
@@ -86,7 +86,8 @@ def evaluate_gate(model, gate: Gate, test, *, n_samples: int, dropout_p: float |
     untimed = torch_threads(untimed_threads) if untimed_threads else contextlib.nullcontext()
     try:
         with untimed:  # the metric passes, on ``untimed_threads``
-            h, gains = model.features(x, return_gains=True)
+            with distinct_frames_once(model):  # untimed: each distinct frame encoded once, the same numbers
+                h, gains = model.features(x, return_gains=True)
             # Metrics from two full passes (``assemble``): every setting's frames take the same
             # deterministic or always-dropout result, so settings differ only in which frames they select.
             passes = {}

@@ -54,7 +54,7 @@ import torch
 
 from drfkit.core.metrics import prediction_metrics
 from drfkit.core.metrics import rank_correlation
-from drfkit.models.parts import check_dropout_p, check_n_samples
+from drfkit.models.parts import check_dropout_p, check_n_samples, distinct_frames_once
 from drfkit.methods.uncertainty import as_model_input, summarise_samples
 
 SETTINGS = ("no_dropout", "random", "kalman_gain", "always")
@@ -362,7 +362,8 @@ def fit_gate(model, val, *, n_samples: int, dropout_p: float | None = None, tole
     was = eval_mode(model)
     try:
         x = as_model_input(model, val.inputs).to(device)
-        h, gains = model.features(x, return_gains=True)
+        with distinct_frames_once(model):  # not timed: each distinct frame encoded once, the same numbers
+            h, gains = model.features(x, return_gains=True)
         if gains is None:
             raise ValueError(f"model kind {model.config.get('kind')!r} has no Kalman filter; gating needs a model that "
                              f"declares competency_gain (the DRF, 'drf')")

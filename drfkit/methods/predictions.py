@@ -15,6 +15,12 @@ One entry per rate: ``predict_rates`` draws the masks' uniforms once per head ch
 rate is the same member of its five-rate curve; 02's evaluation of a model is 04's curve at that rate).
 A call computes only the rates it does not find.
 
+The deterministic part of a prediction (``model.features``: the encoder, then the filter or LSTM) is stored
+too, in ``features/`` beside the predictions, keyed by the same model, inputs, chunk size, device and code but by
+no rate, sample count or seed: a later call at other rates (04's curves after 02's and 04's evaluations at the
+models' own rates) runs only the heads, about a twentieth of a filter's evaluation. The features draw no random
+numbers, so the predictions are the same bit for bit (tested).
+
 Change any of these and the file name changes, so a stale entry is never read. Files live
 in ``results/<profile>/predictions/`` (not committed; delete the folder to empty the cache),
 written atomically; a damaged one is recomputed. Hashing the weights themselves (a few ms)
@@ -35,13 +41,14 @@ from typing import Any
 import torch
 
 from drfkit.util.io import CorruptArtefactError, atomic_torch_save, param_hash, torch_load_checked
-from drfkit.methods.uncertainty import Prediction, as_model_input, predict_rates
+from drfkit.methods.uncertainty import Prediction, as_model_input, model_features, predict_rates
 
 # 2: the masks are drawn as uniforms shared by the rates, per head chunk (uncertainty.predict_rates); a
 # prediction stored by format 1 holds other (equally valid) draws and is computed again
 # 3: the dropout-off point estimate is stored beside the MC moments
 # 4: one entry per rate (a call computes the rates it does not find)
 FORMAT = 4
+FEATURES_FORMAT = 1
 FIELDS = ("mean", "aleatoric", "epistemic", "total", "point")
 # sequences per prediction chunk of every test-set evaluation: one batch size (it orders the masks' draws), so a
 # later call on the same inputs (calibration, the curves, the mechanism tables) finds the evaluation's entry
@@ -110,9 +117,10 @@ def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, d
     found = {p: pred for p, path in paths.items() if (pred := _read(path)) is not None}
     missing = [p for p in dict.fromkeys(rates) if p not in found]
     if missing:
+        h = None if cache is None else cached_features(model, x, cache=cache, batch_size=batch_size, device=device)
         torch.manual_seed(seed)  # the dropout masks are part of the prediction
         computed = predict_rates(model, x, n_samples=n_samples, dropout_rates=missing, batch_size=batch_size,
-                                 device=device)
+                                 device=device, features=h)
         for p, pred in zip(missing, computed):
             found[p] = pred
             if p in paths:
@@ -120,6 +128,32 @@ def cached_predict_rates(model, inputs, *, cache: Path | None, n_samples: int, d
                 atomic_torch_save(paths[p], {"format": FORMAT, "label": label, "prediction": {
                     **{f: getattr(pred, f) for f in FIELDS}, "n_samples": pred.n_samples, "dropout_p": pred.dropout_p}})
     return [found[p] for p in rates]
+
+
+def features_key(model, inputs: torch.Tensor, batch_size: int | None, device: torch.device | str | None) -> str:
+    """The store's file stem of ``model_features(model, inputs, batch_size, device)`` (see the module docstring)."""
+    device_type = torch.device(device).type if device is not None else next(model.parameters()).device.type
+    return param_hash({"format": FEATURES_FORMAT, "features": True, "model": weights_sha256(model),
+                       "inputs": tensor_sha256(inputs), "batch_size": batch_size, "device": device_type,
+                       "code": prediction_code_sha256()})
+
+
+def cached_features(model, inputs, *, cache: Path, batch_size: int | None = None, device=None) -> torch.Tensor:
+    """``drfkit.methods.uncertainty.model_features`` (B, T, D), read from ``cache``/features/ when the same model
+    ran on the same inputs before, else computed and stored (atomically; a damaged entry is computed again)."""
+    x = as_model_input(model, inputs)
+    path = Path(cache) / "features" / f"{features_key(model, x, batch_size, device)}.pt"
+    if path.exists():
+        try:
+            stored = torch_load_checked(path)
+            if stored.get("format") == FEATURES_FORMAT and tuple(stored["features"].shape[:2]) == tuple(x.shape[:2]):
+                return stored["features"]
+        except (CorruptArtefactError, KeyError, TypeError, AttributeError):
+            pass
+    h = model_features(model, x, batch_size=batch_size, device=device)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_torch_save(path, {"format": FEATURES_FORMAT, "features": h})
+    return h
 
 
 def point_and_sigma(model, images, *, cache: Path | None, n_samples: int, seed: int):
@@ -144,4 +178,4 @@ def _read(path: Path) -> Prediction | None:
     return None
 
 
-__all__ = ["EVAL_BATCH_SIZE", "PREDICTION_CODE", "cached_predict_rates", "point_and_sigma", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]
+__all__ = ["EVAL_BATCH_SIZE", "PREDICTION_CODE", "cached_features", "cached_predict_rates", "features_key", "point_and_sigma", "prediction_code_sha256", "prediction_key", "tensor_sha256", "weights_sha256"]

@@ -17,14 +17,16 @@ i.e. the moments of the equal-weight mixture of the S Gaussians.
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import torch
 
 from drfkit.core.metrics import gaussian_interval
 from drfkit.models.compiled import accelerated
-from drfkit.models.parts import SharedUniforms, check_dropout_p, check_n_samples
+from drfkit.models.parts import SharedUniforms, check_dropout_p, check_n_samples, distinct_frames_once
 
 
 # Frames per call of a model's head: S = 25 samples of a 64-unit hidden layer over 600 frames are
@@ -111,33 +113,77 @@ def predict(model, inputs, n_samples: int = 25, dropout_p: float | None = None,
     return predict_rates(model, inputs, n_samples, [dropout_p], batch_size, device, return_gains)[0]
 
 
-@torch.no_grad()
-def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), batch_size: int | None = None,
-                  device=None, return_gains: bool = False) -> list[Prediction]:
-    """``predict`` at several dropout rates, sharing one run of ``model.features`` (the
-    encoder and filter) and one draw of the dropout masks' uniforms (``SharedUniforms``: the
-    mask at rate p keeps U >= p) per chunk: one Prediction per entry of ``dropout_rates``."""
-    n_samples = check_n_samples(n_samples)
-    rates = [model.default_dropout_p if p is None else check_dropout_p(p) for p in dropout_rates]
-    if not rates:
-        raise ValueError("dropout_rates is empty")
-    if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, int)
-                                   or batch_size < 1):
-        raise ValueError(f"batch_size must be a positive int or None, got {batch_size!r}")
-    x = as_model_input(model, inputs)
-    n_seq = x.shape[0]
-    if n_seq == 0:
-        raise ValueError("inputs hold no sequence (B = 0)")
-    chunk = n_seq if batch_size is None else batch_size
+@contextlib.contextmanager
+def _inference(model, device) -> Iterator[torch.device]:
+    """``model`` in eval mode on ``device`` (default: where it is) for a block, each distinct image frame encoded
+    once (``distinct_frames_once``: the same numbers); its device and mode restored after."""
     home, was_training = _model_device(model), model.training
     target = home if device is None else torch.device(device)
     model.to(target).eval()
     try:
+        with distinct_frames_once(model):
+            yield target
+    finally:
+        model.to(home).train(was_training)
+
+
+def _check_batch_size(batch_size) -> None:
+    if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, int)
+                                   or batch_size < 1):
+        raise ValueError(f"batch_size must be a positive int or None, got {batch_size!r}")
+
+
+@torch.no_grad()
+def model_features(model, inputs, batch_size: int | None = None, device=None) -> torch.Tensor:
+    """The deterministic part of ``predict_rates``: ``model.features`` (encoder, then filter or LSTM) of ``inputs``
+    (B, T, ...) in eval mode, chunk by chunk exactly as ``predict_rates`` runs it. Returns (B, T, D) on the CPU:
+    what ``predict_rates(features=...)`` takes, so a later call at other dropout rates runs only the heads."""
+    _check_batch_size(batch_size)
+    x = as_model_input(model, inputs)
+    if x.shape[0] == 0:
+        raise ValueError("inputs hold no sequence (B = 0)")
+    chunk = x.shape[0] if batch_size is None else batch_size
+    with _inference(model, device) as target:
+        parts = []
+        for start in range(0, x.shape[0], chunk):
+            with accelerated(model, target):
+                parts.append(model.features(x[start:start + chunk].to(target))[0].cpu())
+    return torch.cat(parts, dim=0)
+
+
+@torch.no_grad()
+def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), batch_size: int | None = None,
+                  device=None, return_gains: bool = False, features: torch.Tensor | None = None) -> list[Prediction]:
+    """``predict`` at several dropout rates, sharing one run of ``model.features`` (the
+    encoder and filter) and one draw of the dropout masks' uniforms (``SharedUniforms``: the
+    mask at rate p keeps U >= p) per chunk: one Prediction per entry of ``dropout_rates``.
+
+    features: (B, T, D) ``model_features(model, inputs, batch_size, device)`` computed before (the store of
+    ``drfkit.methods.predictions``): only the heads run, and the numbers are the same bit for bit (the features
+    draw no random numbers, so the masks' draws start where they would). Not with ``return_gains``."""
+    n_samples = check_n_samples(n_samples)
+    rates = [model.default_dropout_p if p is None else check_dropout_p(p) for p in dropout_rates]
+    if not rates:
+        raise ValueError("dropout_rates is empty")
+    _check_batch_size(batch_size)
+    x = as_model_input(model, inputs)
+    n_seq = x.shape[0]
+    if n_seq == 0:
+        raise ValueError("inputs hold no sequence (B = 0)")
+    if features is not None and (return_gains or features.ndim != 3 or features.shape[:2] != x.shape[:2]):
+        raise ValueError(f"features must be model_features of these inputs, (B, T, D) with (B, T) = "
+                         f"{tuple(x.shape[:2])}, and cannot give gains; got {tuple(features.shape)}"
+                         f"{' with return_gains' if return_gains else ''}")
+    chunk = n_seq if batch_size is None else batch_size
+    with _inference(model, device) as target:
         parts: list[list[tuple[torch.Tensor, ...]]] = [[] for _ in rates]
         gains: list[torch.Tensor] = []
         for start in range(0, n_seq, chunk):
-            with accelerated(model, target):  # on CUDA a filter runs its captured step; the CPU is untouched
-                h_chunk, g = model.features(x[start:start + chunk].to(target), return_gains=return_gains)
+            if features is not None:
+                h_chunk, g = features[start:start + chunk].to(target), None
+            else:
+                with accelerated(model, target):  # on CUDA a filter runs its captured step; the CPU is untouched
+                    h_chunk, g = model.features(x[start:start + chunk].to(target), return_gains=return_gains)
             # the heads in sub-chunks whose S samples stay in cache (2x faster than one pass on 256 sequences)
             for h in h_chunk.split(max(1, HEAD_CHUNK_FRAMES // h_chunk.shape[1])):
                 uniforms = SharedUniforms()  # one draw of the masks' uniforms, for every rate
@@ -151,8 +197,6 @@ def predict_rates(model, inputs, n_samples: int = 25, dropout_rates=(None,), bat
                     parts[i].append(tuple(t.float().cpu() for t in (*summary, point)))
             if g is not None:
                 gains.append(g.float().cpu())
-    finally:
-        model.to(home).train(was_training)
     all_gains = torch.cat(gains, dim=0) if gains else None
     out = []
     for p, chunks in zip(rates, parts):
