@@ -470,36 +470,61 @@ def test_measure_interleaved_reports_the_slower_function_as_slower():
     assert out["slow"] > 0.0015 and out["fast"] < out["slow"]
 
 
-def test_what_is_not_timed_runs_on_its_own_threads_and_the_times_on_the_callers(monkeypatch):
-    """untimed_threads: the gates' fitting and the metric passes run on that many torch threads, the interleaved
-    timing rounds on the caller's count, which is restored afterwards; the metrics are those of a one-thread run."""
-    import pandas as pd
+def _tiny_gating_profile():
+    return build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4,
+                              gating_picp_tolerance=0.01, gating_sweep_points=3, gating_timing_frames=0,
+                              interval_level=0.95), "a test")
 
+
+def test_what_is_not_timed_runs_as_one_thread_tasks_and_the_times_on_the_callers_threads(monkeypatch):
+    """The gates' fitting and the metric passes are tasks (``map_tasks``: one torch thread each, here in this
+    process); the interleaved timing rounds run afterwards on the caller's count, which is kept."""
     from drfkit.methods import gate_evaluation as ge
     from drfkit.study import studies
 
     val, test = keypoint_data(seed=11), keypoint_data(seed=12)
     monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise=None, protocol="paper":
                         val if split == "val" else test)
-    seen = {"fit": set(), "timed": set()}
-    real_fit, real_measure = gating_study.fit_gate, ge.measure_interleaved
+    monkeypatch.delenv("DRF_WORKERS", raising=False)
+    seen = {"fit": set(), "scored": set(), "timed": set()}
+    order = []
+    real_fit, real_score, real_measure = gating_study.fit_gate, gating_study.score_gate, ge.measure_interleaved
     monkeypatch.setattr(gating_study, "fit_gate", lambda *a, **k: seen["fit"].add(torch.get_num_threads())
-                        or real_fit(*a, **k))
+                        or order.append("fit") or real_fit(*a, **k))
+    monkeypatch.setattr(gating_study, "score_gate", lambda *a, **k: seen["scored"].add(torch.get_num_threads())
+                        or order.append("score") or real_score(*a, **k))
     monkeypatch.setattr(ge, "measure_interleaved", lambda *a, **k: seen["timed"].add(torch.get_num_threads())
-                        or real_measure(*a, **k))
-    P = build_profile(dict(ped_eval_p=[0.01, 0.05], ped_train_p=0.01, device="cpu", n_samples=4,
-                           gating_picp_tolerance=0.01, gating_sweep_points=3, gating_timing_frames=0,
-                           interval_level=0.95), "a test")
-    models = {("drf", 0): tiny_drf()}
+                        or order.append("time") or real_measure(*a, **k))
+    models = {("drf", 0): tiny_drf(), ("drf", 1): tiny_drf(1)}
     before = torch.get_num_threads()
-    torch.set_num_threads(1)
+    torch.set_num_threads(2)
     try:
-        one = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001, sweep=False)
-        two = gating_study.gating_study(P, "pedestrians", models=models, min_run_time=0.001, sweep=False,
-                                        untimed_threads=2)
-        assert torch.get_num_threads() == 1
+        out = gating_study.gating_study(_tiny_gating_profile(), "pedestrians", models=models, min_run_time=0.001,
+                                        sweep=False)
+        assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
-    assert seen == {"fit": {1, 2}, "timed": {1}}
-    metrics = ["setting", "fraction", "picp", "mpiw", "mae"]
-    pd.testing.assert_frame_equal(one["table"][metrics], two["table"][metrics], atol=1e-6)
+    assert seen == {"fit": {1}, "scored": {1}, "timed": {2}}
+    # every seed's untimed work first, then the timing alone: no task runs beside a timed round
+    assert order == ["fit", "fit", "score"] * 2 + ["time", "time"] * 2
+    assert sorted(out["table"]["seed"].unique()) == [0, 1]
+
+
+@pytest.mark.slow
+def test_the_gating_tables_are_the_same_at_one_and_two_workers(monkeypatch):
+    """The metrics (everything but the times) of the gating study, scored in this process and on two worker
+    processes, byte for byte."""
+    from drfkit.study import studies
+
+    val, test = keypoint_data(seed=11), keypoint_data(seed=12)
+    monkeypatch.setattr(studies, "study_data", lambda P, study, split, noise=None, protocol="paper":
+                        val if split == "val" else test)
+    models = {("drf", 0): tiny_drf(), ("drf", 1): tiny_drf(1), ("drf", 2): tiny_drf(2)}
+    timed = ["time_ms", "head_ms", "features_ms", "whole_ms", "batch_ms", "threads"]
+    tables = {}
+    for workers in (1, 2):
+        out = gating_study.gating_study(_tiny_gating_profile(), "pedestrians", models=models, min_run_time=0.001,
+                                        workers=workers)
+        tables[workers] = {k: (t.drop(columns=timed, errors="ignore").to_csv(index=False)) for k, t in out.items()}
+    assert tables[1] == tables[2]
+    assert len(tables[1]["sweep"].splitlines()) > 1

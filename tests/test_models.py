@@ -2,6 +2,7 @@
 Monoloco, MC dropout in the decoder, config round trips and input checks."""
 from __future__ import annotations
 
+import copy
 import math
 
 import pytest
@@ -536,7 +537,8 @@ def test_distinct_frames_once_encodes_each_repeated_frame_once_with_the_same_num
     features (encoder, filter) are bit for bit those of every frame encoded; outside it, with autograd, and after
     the block, every frame is encoded (training and the timed inference are untouched)."""
     from drfkit.models import default_config
-    from drfkit.models.parts import ImageEncoder, distinct_frames_once
+    from drfkit.models.frame_codes import distinct_frames_once
+    from drfkit.models.parts import ImageEncoder
 
     torch.manual_seed(0)
     model = build_model(default_config("drf", "pendulum", 2)).eval()
@@ -544,7 +546,7 @@ def test_distinct_frames_once_encodes_each_repeated_frame_once_with_the_same_num
     bank = torch.randint(0, 256, (5, 24, 24), generator=g, dtype=torch.uint8)  # a rod bank's clean images
     x = torch.randint(0, 256, (6, 40, 24, 24), generator=g, dtype=torch.uint8)  # noisy frames: all distinct
     x[:, ::3] = bank[torch.randint(0, 5, (6, 14), generator=g)]  # a third of the frames from the bank
-    x[2, 20:30] = 0  # a blackout
+    x[2, 20:30] = 0  # ten identical frames
     seen = []
     real = ImageEncoder.encode_frames
     monkeypatch.setattr(ImageEncoder, "encode_frames", lambda self, f: seen.append(f.shape[0]) or real(self, f))
@@ -563,3 +565,87 @@ def test_distinct_frames_once_encodes_each_repeated_frame_once_with_the_same_num
     with distinct_frames_once(model):
         model.features(x)  # autograd on (training): every frame, max_pool2d's gradient rule kept
     assert sum(seen) == 6 * 40
+
+
+def test_one_block_encodes_a_frame_once_across_calls_a_blackout_costs_its_gap_only(monkeypatch):
+    """Inside one (outermost) ``distinct_frames_once`` block the encoder keeps the codes it computed: a second call
+    on the blackout version of a set (its gap pure noise, every other frame the same bytes) encodes the gap's
+    frames only, a third call on either set nothing, and every output is bit for bit the frame-by-frame one. A
+    change of the weights inside the block empties the book; a nested block shares it; after the block it is
+    gone."""
+    from drfkit.models import default_config
+    from drfkit.models.frame_codes import distinct_frames_once
+    from drfkit.models.parts import ImageEncoder
+
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2)).eval()
+    g = torch.Generator().manual_seed(2)
+    x = torch.randint(0, 256, (4, 30, 24, 24), generator=g, dtype=torch.uint8)  # noisy frames: all distinct
+    dark = x.clone()
+    dark[:, 12:18] = torch.randint(0, 256, (4, 6, 24, 24), generator=g, dtype=torch.uint8)  # the gap: pure noise
+    seen = []  # the frames the distinct path sends to the encoder (before its chunks are padded)
+    real = ImageEncoder._encode_rows
+    monkeypatch.setattr(ImageEncoder, "_encode_rows", lambda self, f: seen.append(f.shape[0]) or real(self, f))
+    with torch.no_grad():
+        every = [model.features(v, return_gains=True) for v in (x, dark)]
+        codes_every = model.encoder(x)
+        seen.clear()
+        with distinct_frames_once(model):
+            first = model.features(x, return_gains=True)
+            n_first = sum(seen)
+            with distinct_frames_once(model):  # nested: the outer block's book
+                second = model.features(dark, return_gains=True)
+            n_second = sum(seen) - n_first
+            again = model.encoder(x[:2])  # seen before: nothing encoded
+            n_again = sum(seen) - n_first - n_second
+            book = model.encoder.frame_codes
+            with torch.no_grad():
+                model.encoder.fc.bias.add_(0.5)  # the weights change inside the block: the book is emptied
+            changed = model.encoder(x)
+            n_changed = sum(seen) - n_first - n_second - n_again
+            assert copy.deepcopy(model).encoder.frame_codes is None  # a copy (float64 passes) carries no book
+        assert model.encoder.frame_codes is None and model.encoder.distinct_frames is False  # gone with the block
+        fresh = model.encoder(x)
+    assert (n_first, n_second, n_again, n_changed) == (4 * 30, 4 * 6, 0, 4 * 30)
+    assert book.encoded == 4 * 30 + 4 * 6 + 4 * 30
+    for (h, k), (h0, k0) in zip((first, second), every):
+        assert torch.equal(h, h0) and torch.equal(k, k0)
+    assert torch.equal(again, codes_every[:2]) and torch.equal(changed, fresh)
+
+
+def test_a_frame_encoded_alone_in_a_block_gets_its_large_batch_code():
+    """A call of a block that meets one new frame encodes it in a padded chunk (``MIN_CODE_CHUNK``): its code is
+    the one it gets among many frames, bit for bit (oneDNN's kernels for a batch of 1-3 frames round differently,
+    which would make a gathered code depend on what was encoded with it)."""
+    from drfkit.models import default_config
+    from drfkit.models.frame_codes import distinct_frames_once
+
+    torch.manual_seed(0)
+    model = build_model(default_config("drf", "pendulum", 2)).eval()
+    g = torch.Generator().manual_seed(4)
+    x = torch.randint(0, 256, (1, 41, 24, 24), generator=g, dtype=torch.uint8)
+    with torch.no_grad():
+        many = model.encoder(x)  # every frame, one chunk of 41
+        with distinct_frames_once(model):
+            model.encoder(x[:, :40])
+            alone = [model.encoder(x[:, 40:])]  # the one new frame
+            alone.append(model.encoder(x[:, 40:]))  # and again, from the book
+    assert all(torch.equal(a[0, 0], many[0, 40]) for a in alone)
+
+
+def test_frame_codes_survive_hash_collisions_and_refuse_bad_rows(monkeypatch):
+    """Every key match is checked byte for byte: with every key equal (all collide), each frame still gets its own
+    code; rows that are not uint8 multiples of 8 bytes are refused with the shape named."""
+    import drfkit.models.frame_codes as fc
+    from drfkit.models.parts import ImageEncoder
+
+    g = torch.Generator().manual_seed(3)
+    rows = torch.randint(0, 256, (20, 576), generator=g, dtype=torch.uint8)
+    book = fc.FrameCodes(ImageEncoder(8, 4))
+    encode = lambda r: r[:, :8].to(torch.float32)  # noqa: E731  a code that names its frame
+    with pytest.raises(ValueError, match=r"uint8 rows.*\(3, 5\)"):
+        fc.frame_keys(torch.zeros(3, 5, dtype=torch.uint8))
+    monkeypatch.setattr(fc, "frame_keys", lambda r: torch.zeros(r.shape[0], dtype=torch.int64))  # all collide
+    book.codes_of(rows[:12], encode)
+    codes = book.codes_of(rows[6:], encode)  # 6 seen, 8 new
+    assert torch.equal(codes, rows[6:, :8].float())

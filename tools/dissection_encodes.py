@@ -1,18 +1,22 @@
-"""The dissection of one filter with its noiseless frames encoded once per model against once per set, in one run.
+"""The dissection of one filter with its passes in one ``distinct_frames_once`` block against a block per call,
+in one run.
 
-    .venv/bin/python tools/dissection_encodes.py                      # the paper profile's fifth-round DRF, seed 0
+    .venv/bin/python tools/dissection_encodes.py                      # the book protocol's steep DRF, seed 0
     .venv/bin/python tools/dissection_encodes.py --profile quick --untrained --sequences 20 --rounds 1
 
-``drfkit.study.dissection`` encodes each of its three sets (training noise, highest noise, blackout) and the
-noiseless frames of each, which show the same motions: once per model since the sixth round, once per set before.
-This times ``_dissect_one`` both ways on the first ``--sequences`` test sequences, in alternating rounds at one torch
-thread, after one untimed call, checks that both give the same rows byte for byte, and prints per way the median seconds and the encoder
-passes made. The checkpoint is the profile's committed one (``--untrained``: a random model of the kind, for a test).
-Nothing is written under results/ beyond the test sets the profile makes anyway.
+``drfkit.study.dissection`` passes a filter over three sets made from the same test sequences (training noise,
+highest noise, and the blackout: the training noise set with frames [30, 45) pure noise) and over their noiseless
+frames. Since the eighth round the whole task is one block, so the encoder sees each distinct frame once per filter
+(``drfkit.models.frame_codes``); before, each call was its own block (each distinct frame once per call). This
+times ``_dissect_one`` both ways on the first ``--sequences`` test sequences, in alternating rounds at one torch
+thread, after one untimed call, checks that both give the same rows byte for byte, and prints per way the median
+seconds and the frames the encoder ran on. The checkpoint is the profile's committed one (``--untrained``: a random
+model of the kind, for a test). Nothing is written under results/ beyond the test sets the profile makes anyway.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import time
@@ -36,8 +40,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from drfkit.methods import dissection as dis
     from drfkit.models import build_model
+    from drfkit.models.parts import ImageEncoder
     from drfkit.models.portable import portable
     from drfkit.study import dissection, studies
     from drfkit.study.params import for_notebook, load_profile
@@ -55,43 +59,40 @@ def main(argv: list[str] | None = None) -> int:
                      f"trained: {sorted(trained)}")
         model = trained[key]
     sets = {name: {k: v[:args.sequences] for k, v in arrays.items()} for name, arrays in dissection._sets(P, "test").items()}
-    real_sets, real_prepared, real_observations = dissection._sets, dissection._prepared, dis.observations
-    passes = []
+    real_sets, real_block, real_encode = dissection._sets, dissection.distinct_frames_once, ImageEncoder.encode_frames
+    frames = []
 
-    def counted(model_, images, **kw):
-        passes.append(tuple(images.shape))
-        return real_observations(model_, images, **kw)
+    def counted(self, x):
+        frames.append(x.shape[0])
+        return real_encode(self, x)
 
-    def once_per_set(model_, arrays, codes):  # the code before the sixth round
-        w, r = dis.observations(model_, torch.from_numpy(arrays["images"]))
-        w_clean, _ = dis.observations(model_, torch.from_numpy(arrays["clean"]))
-        return w, r, model_.observed_truth(w_clean, torch.from_numpy(arrays["targets"]))
-
-    ways = {"once per model": real_prepared, "once per set": once_per_set}
+    ways = {"one block per filter": real_block, "a block per call": lambda model_: contextlib.nullcontext()}
     seconds = {way: [] for way in ways}
     rows, counts = {}, {}
     shared = portable({key: model})
     try:
-        dissection._sets, dis.observations = (lambda P_, split: sets), counted
+        dissection._sets, ImageEncoder.encode_frames = (lambda P_, split: sets), counted
         dissection._dissect_one(P, "test", *key, float("nan"), shared)  # untimed: the first call's one-off costs
         for r in range(args.rounds):
             for way in (list(ways) if r % 2 == 0 else list(ways)[::-1]):
-                dissection._prepared = ways[way]
-                passes.clear()
+                dissection.distinct_frames_once = ways[way]
+                frames.clear()
                 t0 = time.perf_counter()
                 out = dissection._dissect_one(P, "test", *key, float("nan"), shared)
                 seconds[way].append(time.perf_counter() - t0)
-                rows[way], counts[way] = repr(out), len(passes)
+                rows[way], counts[way] = repr(out), sum(frames)
     finally:
-        dissection._sets, dissection._prepared, dis.observations = real_sets, real_prepared, real_observations
-    same = rows["once per model"] == rows["once per set"]
-    base = statistics.median(seconds["once per set"])
+        dissection._sets, dissection.distinct_frames_once, ImageEncoder.encode_frames = real_sets, real_block, real_encode
+    same = rows["one block per filter"] == rows["a block per call"]
+    base = statistics.median(seconds["a block per call"])
     print(f"{args.kind} seed {args.seed}, {args.sequences} sequences per set, {args.rounds} round(s), one thread")
-    print("| encoded | encoder passes | median s | vs once per set |")
+    print("| encoded | frames encoded | median s | vs a block per call |")
     print("|---|---|---|---|")
     for way in ways:
         median = statistics.median(seconds[way])
         print(f"| {way} | {counts[way]} | {median:.1f} | {base / median:.2f}x |")
+    per_set = sets["train"]["images"].shape[0] * sets["train"]["images"].shape[1]
+    print(f"(one set is {per_set} frames)")
     print(f"rows byte for byte the same: {same}")
     return 0 if same else 1
 

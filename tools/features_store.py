@@ -7,7 +7,7 @@ curves' later rates run on stored features instead of computing them again.
 Notebook 04's PICP–MPIW curves ask every model at four dropout rates besides its own on test sets that the
 evaluations before them already predicted at its own rate. ``drfkit.methods.predictions`` stores the deterministic
 part of the first prediction (``model.features``: the encoder, then the filter or LSTM), so the curves run only the
-heads. And the evaluation encodes each distinct frame once (``drfkit.models.parts.distinct_frames_once``): the
+heads. And the evaluation encodes each distinct frame once (``drfkit.models.frame_codes.distinct_frames_once``): the
 pendulum's clean frames come from the rod bank's few hundred images. Per model kind (seed ``--seed``), on the first
 ``--sequences`` test sequences at ``--noise``, at one torch thread, in alternating rounds after one untimed call,
 this prints the median seconds of the encoder (``model.observe``) on every frame and on the distinct ones, of the
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from drfkit.methods import predictions
     from drfkit.models import build_model
-    from drfkit.models.parts import distinct_frames_once
+    from drfkit.models.frame_codes import distinct_frames_once
     from drfkit.study import studies
     from drfkit.study.params import for_notebook, load_profile
 

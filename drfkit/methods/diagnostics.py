@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from drfkit.core.metrics import rank_correlation
+from drfkit.models.frame_codes import distinct_frames_once
 
 CLEAN_LEVEL = 0.0      # a frame with noise level <= this is clean
 NOISY_LEVEL = 0.4      # a frame with noise level > this is noisy
@@ -38,24 +39,26 @@ def filter_trace(model, inputs: torch.Tensor, batch_size: int = 100) -> dict[str
     'mean' (N, T, out) the decoder's mean. A filter (a model with ``filter_diagnostics``: the DRF, the
     known-dynamics filter) also: 'gain' (N, T) its gain on the observed dims (1 at t = 0);
     'prior_err' and 'static_err' (N, T-1): the distance of the one-step prediction, and of the last
-    posterior, to the next observation; 'spectral_radius' (M,) of its transition matrices.
+    posterior, to the next observation; 'spectral_radius' (M,) of its transition matrices. Each distinct
+    frame is encoded once (``distinct_frames_once``; across calls inside a caller's block too): the same numbers.
     """
     was_training = model.training
     model.eval()
     try:
         parts: dict[str, list[np.ndarray]] = {}
-        for start in range(0, inputs.shape[0], batch_size):
-            x = inputs[start:start + batch_size]
-            if hasattr(model, "filter_diagnostics"):
-                out = model.filter_diagnostics(x)
-                h = out.pop("h")
-            else:
-                _, r = model.observe(x)
-                out = {"r": r[..., :_observed(model)].mean(-1)}
-                h, _ = model.features(x)
-            out["mean"] = model.head(h)[0]
-            for name, value in out.items():
-                parts.setdefault(name, []).append(value.float().cpu().numpy())
+        with distinct_frames_once(model):
+            for start in range(0, inputs.shape[0], batch_size):
+                x = inputs[start:start + batch_size]
+                if hasattr(model, "filter_diagnostics"):
+                    out = model.filter_diagnostics(x)
+                    h = out.pop("h")
+                else:
+                    _, r = model.observe(x)
+                    out = {"r": r[..., :_observed(model)].mean(-1)}
+                    h, _ = model.features(x)  # the frames' codes come from the block's book
+                out["mean"] = model.head(h)[0]
+                for name, value in out.items():
+                    parts.setdefault(name, []).append(value.float().cpu().numpy())
         return {name: np.concatenate(values) for name, values in parts.items()}
     finally:
         model.train(was_training)

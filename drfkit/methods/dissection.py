@@ -45,7 +45,7 @@ import math
 import numpy as np
 import torch
 
-from drfkit.models.parts import distinct_frames_once
+from drfkit.models.frame_codes import distinct_frames_once
 
 LEVEL_BIN = 0.05        # width of the noise-level bins of the calibration table and of the oracle gain
 GAIN_TOLERANCE = 1e-6   # (a1) a clamped frame whose gain reads back above this is an error, not a measurement

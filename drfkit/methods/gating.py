@@ -17,8 +17,8 @@ between k_t and the absolute error of the deterministic prediction, on VALIDATIO
 
 Nothing here looks at test data before the gate is fixed: ``fit_gate`` takes only the
 validation set; ``choose_direction`` / ``choose_threshold`` take only validation arrays
-(their arguments say so); the test set enters only ``drfkit.methods.gate_evaluation``'s ``evaluate_gate`` /
-``sweep_gate``, which apply a fitted ``Gate``. The threshold is the validation-score quantile of the
+(their arguments say so); the test set enters only ``drfkit.methods.gate_evaluation`` (``score_gate``,
+``time_gate`` and ``evaluate_gate`` / ``sweep_gate``, which call both), which applies a fitted ``Gate``. The threshold is the validation-score quantile of the
 smallest dropout fraction whose validation PICP is within ``tolerance`` of
 always-dropout's validation PICP. It is an absolute score value, so on noisier frames
 more of them cross it. The study (``drfkit.study.gating_study``) fits on the ``val`` split (held-out sequences) at
@@ -54,7 +54,8 @@ import torch
 
 from drfkit.core.metrics import prediction_metrics
 from drfkit.core.metrics import rank_correlation
-from drfkit.models.parts import check_dropout_p, check_n_samples, distinct_frames_once
+from drfkit.models.frame_codes import distinct_frames_once
+from drfkit.models.parts import check_dropout_p, check_n_samples
 from drfkit.methods.uncertainty import as_model_input, summarise_samples
 
 SETTINGS = ("no_dropout", "random", "kalman_gain", "always")

@@ -26,7 +26,8 @@ import torch
 
 from drfkit.core.metrics import gaussian_interval
 from drfkit.models.compiled import accelerated
-from drfkit.models.parts import SharedUniforms, check_dropout_p, check_n_samples, distinct_frames_once
+from drfkit.models.frame_codes import distinct_frames_once
+from drfkit.models.parts import SharedUniforms, check_dropout_p, check_n_samples
 
 
 # Frames per call of a model's head: S = 25 samples of a 64-unit hidden layer over 600 frames are

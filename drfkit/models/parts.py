@@ -7,9 +7,7 @@ Shapes: B batch, T time, N = B*T frames, n latent size, S Monte Carlo samples.
 """
 from __future__ import annotations
 
-import contextlib
 import math
-from typing import Iterator
 
 import torch
 import torch.nn.functional as F
@@ -31,6 +29,11 @@ PENDULUM_SIZE = 24
 # encoder's forward + backward runs ~1.5x faster on one CPU core (measured, 3750 frames:
 # 1.17 s whole, 0.77 s in chunks of 256). The function computed is the same.
 ENCODER_CHUNK_FRAMES = 256
+# oneDNN convolves a batch of very few frames with other kernels, which round differently: a frame's code changed in
+# the last bit in batches of 1-3 frames at one thread and of 1-11 frames (not multiples of 4) at two (measured on
+# the AMD EPYC; 4-256 frames at one thread gave the 256-frame batch's codes bit for bit). The distinct-frames path,
+# which gathers codes computed in other calls, pads a smaller chunk to this many frames.
+MIN_CODE_CHUNK = 32
 IMAGE_DOWNSAMPLES = ("pool", "stride")
 N_KEYPOINTS = 17
 
@@ -68,17 +71,20 @@ class ImageEncoder(nn.Module):
         self.fc = nn.Linear(channels * (PENDULUM_SIZE // 4) ** 2, feature_dim)
         self.out_dim = feature_dim
         self.distinct_frames = False  # True for a block of inference: ``distinct_frames_once``
+        self.frame_codes = None  # that block's book of the codes computed (``drfkit.models.frame_codes``)
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         if images.ndim != 4 or images.shape[-2:] != (PENDULUM_SIZE, PENDULUM_SIZE):
             raise ValueError(f"pendulum images must have shape (B, T, 24, 24), got {tuple(images.shape)}")
         frames, (b, t) = fold_time(images, 2)  # (N, 24, 24)
-        index = None
         if frames.dtype == torch.uint8:
             if self.distinct_frames and not torch.is_grad_enabled():
-                # each distinct frame once: the bytes' rows made unique (0.1 s for 38,400 frames on a CPU core)
-                distinct, index = torch.unique(frames.flatten(1), dim=0, return_inverse=True)
-                frames = distinct.view(-1, PENDULUM_SIZE, PENDULUM_SIZE)
+                # each distinct frame once: the bytes' rows made unique (0.2 s for 38,400 frames on a CPU core),
+                # and of those only the ones the block has not encoded yet (``FrameCodes``)
+                distinct, index = torch.unique(frames.flatten(1), dim=0, return_inverse=True)  # (M, 576), (N,)
+                codes = (self.frame_codes.codes_of(distinct, self._encode_rows) if self.frame_codes is not None
+                         else self._encode_rows(distinct))  # (M, feature_dim)
+                return codes[index].view(b, t, -1)
             x = frames.to(self.fc.weight.dtype) / 255.0
         elif frames.is_floating_point():
             # Floats are taken as already scaled to [0, 1]; 0..255 floats would train on
@@ -89,8 +95,26 @@ class ImageEncoder(nn.Module):
             x = frames.to(self.fc.weight.dtype)
         else:
             raise TypeError(f"pendulum images must be uint8 (or float in [0, 1]), got {images.dtype}")
-        x = torch.cat([self.encode_frames(chunk) for chunk in x.split(ENCODER_CHUNK_FRAMES)])
-        return (x if index is None else x[index]).view(b, t, -1)
+        return self._encode_float(x).view(b, t, -1)
+
+    def _encode_rows(self, rows: torch.Tensor) -> torch.Tensor:
+        """(M, 576) uint8 frames as rows -> (M, feature_dim), each chunk padded to ``MIN_CODE_CHUNK`` frames: the
+        codes of the distinct-frames path are gathered across calls, so a frame's code must not depend on how
+        many frames came with it."""
+        x = rows.view(-1, PENDULUM_SIZE, PENDULUM_SIZE).to(self.fc.weight.dtype) / 255.0
+        codes = []
+        for chunk in x.split(ENCODER_CHUNK_FRAMES):
+            n = chunk.shape[0]
+            if n < MIN_CODE_CHUNK:  # copies of its first frame: the large-batch kernels, thrown away after
+                chunk = torch.cat([chunk, chunk[:1].expand(MIN_CODE_CHUNK - n, -1, -1)])
+            codes.append(self.encode_frames(chunk)[:n])
+        return torch.cat(codes) if codes else x.new_zeros((0, self.out_dim))
+
+    def _encode_float(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, 24, 24) frames in [0, 1] -> (N, feature_dim), in chunks of ``ENCODER_CHUNK_FRAMES``."""
+        if not x.shape[0]:
+            return x.new_zeros((0, self.out_dim))
+        return torch.cat([self.encode_frames(chunk) for chunk in x.split(ENCODER_CHUNK_FRAMES)])
 
     def encode_frames(self, frames: torch.Tensor) -> torch.Tensor:
         """(N, 24, 24) float frames -> (N, feature_dim)."""
@@ -110,26 +134,6 @@ def max_pool_2x2(x: torch.Tensor) -> torch.Tensor:
         return F.max_pool2d(x, 2)
     rows = torch.maximum(x[..., 0::2, :], x[..., 1::2, :])
     return torch.maximum(rows[..., 0::2], rows[..., 1::2])
-
-
-@contextlib.contextmanager
-def distinct_frames_once(model: nn.Module) -> Iterator[None]:
-    """Inside the block, without autograd, each image encoder of ``model`` encodes every distinct uint8 frame of
-    a call once and gathers the codes back: the same features bit for bit (a frame's code does not depend on the
-    other frames of its chunk, tested), fewer conv passes where frames repeat. The pendulum's do: its clean frames
-    are drawn from the rod bank's few hundred images, so 256 test sequences at max noise 0.5 hold about 15,000
-    distinct frames among 38,400, and a blackout's blank frames are all alike. Evaluation only: a camera never
-    repeats a frame bit for bit, so the timed inference (notebooks 05 and 06) encodes every frame. The flags are
-    restored in ``finally``."""
-    encoders = [m for m in model.modules() if isinstance(m, ImageEncoder)]
-    before = [e.distinct_frames for e in encoders]
-    for e in encoders:
-        e.distinct_frames = True
-    try:
-        yield
-    finally:
-        for e, flag in zip(encoders, before):
-            e.distinct_frames = flag
 
 
 class KeypointEncoder(nn.Module):

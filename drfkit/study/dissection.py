@@ -21,6 +21,7 @@ from drfkit.methods import dissection as dis
 from drfkit.study import studies
 from drfkit.study.dynamics import blackout_split, dropout_off_point
 from drfkit.util.tasks import forget, map_tasks, memo
+from drfkit.models.frame_codes import distinct_frames_once
 from drfkit.models.portable import portable
 
 # (a3) the gain clamped on the first k gap frames: the first sequences of the scored split (enough for a curve)
@@ -125,8 +126,16 @@ def _sets(P, split: str) -> dict[str, dict[str, np.ndarray]]:
 
 def _dissect_one(P, split: str, kind: str, seed: int, nd_ood: float, shared: dict) -> tuple[list, list, list, list]:
     """``dissect_filters``' rows of one filter (a task of ``map_tasks``): (calibration, [intervention], horizons,
-    gains)."""
-    model, sets = shared[(kind, seed)].model, _sets(P, split)
+    gains). Its passes share one ``distinct_frames_once`` block: the three sets show the same sequences, so the
+    encoder sees each distinct frame once per filter (the blackout set's frames outside the gap are the training
+    noise set's), the same numbers."""
+    model = shared[(kind, seed)].model
+    with distinct_frames_once(model):
+        return _dissect(P, split, kind, seed, nd_ood, model)
+
+
+def _dissect(P, split: str, kind: str, seed: int, nd_ood: float, model) -> tuple[list, list, list, list]:
+    sets = _sets(P, split)
     train_level, ood_level = P.pendulum.train_max_noise, max(P.pendulum.eval_max_noise)
     dark = sets["blackout"]
     start, stop = blackout_frames(dark["images"].shape[1])

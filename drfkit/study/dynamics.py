@@ -35,6 +35,7 @@ from drfkit.methods.diagnostics import (abs_error_per_frame, blackout_summary, f
 from drfkit.util.paths import predictions_dir
 from drfkit.methods.predictions import point_and_sigma
 from drfkit.util.tasks import forget, map_tasks, memo
+from drfkit.models.frame_codes import distinct_frames_once
 from drfkit.models.portable import portable
 
 
@@ -75,12 +76,13 @@ def _dark(P, split: str) -> dict[str, np.ndarray]:
 
 def _mechanism_task(P, split: str, noise: float, kind: str, seed: int, shared: dict) -> dict[str, Any]:
     model, test = shared[(kind, seed)].model, _split(P, split, noise)
-    row = {"model": kind, "seed": seed, "noise": float(noise),
-           **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
-    if hasattr(model, "filter_diagnostics"):  # a filter: its gain on the blackout's clean and pure-noise frames
-        dark = _dark(P, split)
-        on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
-        row |= {f"{k}_blackout": on_dark[k] for k in ("gain_clean", "gain_pure", "gain_ratio")}
+    with distinct_frames_once(model):  # one block: the blackout set's frames outside its gap are the test set's
+        row = {"model": kind, "seed": seed, "noise": float(noise),
+               **mechanism_summary(filter_trace(model, torch.from_numpy(test["images"])), test["noise"])}
+        if hasattr(model, "filter_diagnostics"):  # a filter: its gain on the blackout's clean and pure-noise frames
+            dark = _dark(P, split)
+            on_dark = mechanism_summary(filter_trace(model, torch.from_numpy(dark["images"])), dark["noise"])
+            row |= {f"{k}_blackout": on_dark[k] for k in ("gain_clean", "gain_pure", "gain_ratio")}
     return row
 
 

@@ -8,16 +8,16 @@ competency and how the threshold is chosen).
 """
 from __future__ import annotations
 
-import contextlib
 from typing import Any
 
 import pandas as pd
 
-from drfkit.methods.gate_evaluation import evaluate_gate, sweep_gate
+from drfkit.methods.gate_evaluation import score_gate, split_sweep, sweep_thresholds, time_gate
 from drfkit.methods.gating import fit_gate
-from drfkit.methods.timing.clock import torch_threads
+from drfkit.models.portable import portable
 from drfkit.study import registry
 from drfkit.util.progress import steps
+from drfkit.util.tasks import map_tasks
 
 
 # --------------------------------------------------------------------------- the study
@@ -41,7 +41,7 @@ def gated_models(models: dict) -> dict[int, Any]:
 
 
 def gating_study(P, study: str, models: dict | None = None, min_run_time: float = 0.3,
-                 val_noise: float | None = None, sweep: bool = True, untimed_threads: int | None = None
+                 val_noise: float | None = None, sweep: bool = True, workers: int | str | None = None
                  ) -> dict[str, pd.DataFrame]:
     """Fit two gates per DRF seed on validation data, then evaluate and sweep them on the test set, in one pass of
     the test set per seed (the DRF: the models that declare ``competency_gain``, ``gated_models``).
@@ -52,9 +52,13 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     (``Study.train_level``: what a deployed system can tune on), evaluated on the same test pass and timed in the
     same interleaved run. The sweep's thresholds tune nothing, and claim C7 is judged on them; its rows hold
     Kalman-gain, random and oracle gating at each threshold of the first gate (``sweep=False``: an empty 'sweep',
-    the settings' metrics unchanged). Times are measured on about ``P.gating.timing_frames`` frames of evenly
-    spaced test sequences (0: all), at the caller's torch threads; the gates' fitting and the metric passes, which
-    are not timed, on ``untimed_threads`` (None: the caller's). Returns
+    the settings' metrics unchanged).
+
+    What is not timed -- the gates' fitting and the metric passes (``score_gate``) -- runs as one task per seed
+    (``drfkit.util.tasks.map_tasks`` on ``workers``: every core; one torch thread per task, so the metrics are the
+    same at any worker count). Then the times, one seed after another in this process at the caller's torch
+    threads with no task running beside them (``time_gate``), on about ``P.gating.timing_frames`` frames of evenly
+    spaced test sequences (0: all). Returns
     {'table': one row per seed and setting, 'sweep': one row per seed, method and threshold,
     'validation': the candidate table per seed, 'table_train': the four settings with the training-noise gate
     (no_dropout and always are the first table's rows), 'train_gate': per seed, what the training-noise gate
@@ -72,21 +76,19 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     level_ = evaluation_level(P, study)
     val_level = level_ if val_noise is None else float(val_noise)
     train_level = float(entry.train_level(P))
-    val, test = studies.study_data(P, study, "val", val_level), studies.study_data(P, study, "test", level_)
-    val_train = studies.study_data(P, study, "val", train_level)
+    data = {"val": studies.study_data(P, study, "val", val_level), "test": studies.study_data(P, study, "test", level_),
+            "val_train": studies.study_data(P, study, "val", train_level), "models": portable(drf)}
     fit = dict(n_samples=P.uncertainty.n_samples, tolerance=P.gating.picp_tolerance, n_points=P.gating.sweep_points,
                level=P.uncertainty.interval_level, device=device)
+    scored = map_tasks(_score_task, [(seed, fit, sweep) for seed in sorted(drf)], shared=data, workers=workers,
+                       desc=f"{study}: gates fitted and scored per DRF seed (untimed)")
     tables, sweeps, vals, train_tables, train_gates = [], [], [], [], []
-    for seed, model in steps(sorted(drf.items()), f"{study}: gating per DRF seed"):
-        model = model.to(device)
-        with torch_threads(untimed_threads) if untimed_threads else contextlib.nullcontext():
-            gate, val_table = fit_gate(model, val, seed=seed, **fit)
-            gate_train, _ = fit_gate(model, val_train, seed=seed, **fit)
-        kwargs = dict(n_samples=P.uncertainty.n_samples, level=P.uncertainty.interval_level, seed=seed, device=device,
-                      min_run_time=min_run_time, timing_frames=P.gating.timing_frames, other_gates={"train": gate_train},
-                      untimed_threads=untimed_threads)
-        table, swept = (sweep_gate(model, gate, test, **kwargs) if sweep
-                        else (evaluate_gate(model, gate, test, **kwargs), pd.DataFrame()))
+    for seed, (gate, gate_train, val_table, score) in steps(list(zip(sorted(drf), scored)),
+                                                            f"{study}: gating timed per DRF seed"):
+        table = time_gate(drf[seed].to(device), score, data["test"], n_samples=P.uncertainty.n_samples,
+                          device=device, min_run_time=min_run_time, timing_frames=P.gating.timing_frames,
+                          other_gates={"train": gate_train})
+        table, swept = split_sweep(table, gate) if sweep else (table, pd.DataFrame())
         ident = {"study": study, "seed": seed, "noise": level_}
         own = ~table["setting"].str.contains("@train")
         tables.append(table[own].assign(**ident, val_noise=val_level, **_gate_info(gate)))
@@ -103,6 +105,18 @@ def gating_study(P, study: str, models: dict | None = None, min_run_time: float 
     ordered = lambda t: t[lead + [c for c in t.columns if c not in lead]]  # noqa: E731
     return {"table": ordered(cat(tables)), "sweep": ordered(cat(sweeps)), "validation": cat(vals),
             "table_train": ordered(cat(train_tables)), "train_gate": pd.DataFrame(train_gates)}
+
+
+def _score_task(seed: int, fit: dict[str, Any], sweep: bool, shared: dict) -> tuple:
+    """One seed's untimed work (a task of ``map_tasks``): both gates fitted on validation, the test set scored.
+    Returns (gate, training-noise gate, the validation table, ``ScoredGate``)."""
+    model = shared["models"][seed].model.to(fit["device"])
+    gate, val_table = fit_gate(model, shared["val"], seed=seed, **fit)
+    gate_train, _ = fit_gate(model, shared["val_train"], seed=seed, **fit)
+    score = score_gate(model, gate, shared["test"], n_samples=fit["n_samples"], level=fit["level"], seed=seed,
+                       device=fit["device"], thresholds=sweep_thresholds(gate) if sweep else None,
+                       other_gates={"train": gate_train})
+    return gate, gate_train, val_table, score
 
 
 def _gate_info(gate) -> dict[str, Any]:

@@ -67,7 +67,6 @@ from drfkit.book.runtime import start_notebook
 P, timer = start_notebook("06_competency_gating", globals())
 
 # %%
-import os
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -91,7 +90,8 @@ GROUPS = [(s, protocol) for s in STUDIES for protocol in PROTOCOLS[s]]  # (study
 # Times need a fixed thread count: `threads`, or 1 when it is 0 (torch's default uses every core,
 # and on a machine shared with other jobs oversubscribed threads make the filter's small ops
 # orders of magnitude slower). The count is recorded in the `threads` column; what is not timed (fitting
-# the gates, the passes the metrics come from) runs on every core.
+# the gates, the passes the metrics come from) runs first, one task per seed on every core
+# (`drfkit.util.tasks`), and the timing rounds then run alone.
 torch.set_num_threads(P.threads or 1)
 
 # %% [markdown]
@@ -103,9 +103,8 @@ torch.set_num_threads(P.threads or 1)
 # %%
 # NBVAL_IGNORE_OUTPUT
 models = {g: studies.trained_models(P, g[0], protocol=g[1]) for g in GROUPS}
-# the gates' fitting and the metric passes are not timed: every core (os.cpu_count()) runs them
-runs = {g: cached(P.profile, gating_study, P, g[0], models=models[g], untimed_threads=os.cpu_count(), timing=True)
-        for g in GROUPS}
+# the gates' fitting and the metric passes are not timed: one task per seed on every core, before the timing rounds
+runs = {g: cached(P.profile, gating_study, P, g[0], models=models[g], timing=True) for g in GROUPS}
 stack = lambda part: pd.concat([r[part].assign(protocol=g[1]) for g, r in runs.items()], ignore_index=True)  # noqa: E731
 table, sweep, validation = stack("table"), stack("sweep"), stack("validation")
 atomic_write_csv(results_dir(P.profile) / "gating.csv", table)
